@@ -1,0 +1,521 @@
+"""Experiment configuration: TOML files loaded into validated, frozen dataclasses.
+
+A config describes one of the paper's experiments: sampling, horizon, vehicle,
+mission phases, the penalty matrices of LOC and NLSOC, the PD gains, and the
+simulation's wind, sensors and estimator.  Loading rejects, naming the file,
+the key and the reason: unknown keys, missing sections or keys, wrong types
+and shapes, non-symmetric or indefinite Q/H, R not positive definite,
+``ts_s <= 0`` and a horizon shorter than one step.
+
+Matrices may be written as a number (1x1), a flat list (diagonal) or a list
+of rows.  Where the paper's printed matrix is wrong (``../shared/paper/NOTES.md``,
+erratum 7) the config gives the corrected matrix under its name (``Q``), the
+literal printed one under ``<name>_printed`` and lists the name in
+``corrected``.  ``[experiment] matrices = "printed"`` (or ``gcs sim
+--matrices printed``) selects the printed ones; the symmetry and
+definiteness checks of Q and H are then skipped, since the printed matrices
+fail them by construction.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from gcs.errors import ConfigError
+from sitl.reduced import ReducedParams
+from sitl.sensors import ALTITUDE_KINDS, SensorParams
+from sitl.wind import WindParams
+
+__all__ = [
+    "Config", "ExperimentConfig", "MatrixSet", "PhaseConfig", "PdGains", "SimConfig",
+    "EstimatorConfig", "load_config", "parse_config", "resolve_config_path", "bundled_configs",
+    "AFTER_HORIZON", "MATRIX_MODES", "PHASE_KINDS",
+]
+
+AFTER_HORIZON = ("pd", "terminal", "restart")
+MATRIX_MODES = ("corrected", "printed")
+PHASE_KINDS = ("takeoff", "hold", "circle", "land")
+
+Matrix = tuple[tuple[float, ...], ...]
+
+# Subsystem dimensions: (state size n, input size m).
+LOC_SUBSYSTEMS = {"z": (2, 1), "psi": (2, 1), "y_phi": (4, 1), "x_theta": (4, 1)}
+NLSOC_SUBSYSTEMS = {"z_psi": (4, 2), "y_phi": (4, 1), "x_theta": (4, 1)}
+
+
+# --------------------------------------------------------------------------- dataclasses
+
+@dataclass(frozen=True)
+class ExperimentConfig:
+    """``[experiment]``: sampling, horizon and what the metrics measure.
+
+    Attributes
+    ----------
+    name : str
+    description : str
+    ts_s : float
+        Control period (the paper: 0.01 s).
+    horizon_s : float
+        Optimisation horizon t_f = N Ts.
+    after_horizon : {"pd", "terminal", "restart"}
+        What flies after the horizon: hand over to PD, keep the terminal
+        policy (E = H / F(1)), or restart the horizon.
+    duration_s : float
+        Default simulated duration (``gcs sim --duration`` overrides).
+    matrices : {"corrected", "printed"}
+    zero_velocity_reference : bool
+        Feed zero velocity references (the paper's literal circle setting).
+    error_axes : tuple of str
+        Position axes entering J_e (``"z"``, or ``"x", "y", "z"`` for the circle).
+    """
+
+    name: str
+    ts_s: float
+    horizon_s: float
+    duration_s: float
+    description: str = ""
+    after_horizon: str = "pd"
+    matrices: str = "corrected"
+    zero_velocity_reference: bool = False
+    error_axes: tuple[str, ...] = ("z",)
+
+    @property
+    def horizon_steps(self) -> int:
+        """N = round(horizon_s / ts_s)."""
+        return int(round(self.horizon_s / self.ts_s))
+
+
+@dataclass(frozen=True)
+class MatrixSet:
+    """Penalty matrices of one subsystem.
+
+    ``Q``, ``H`` (n x n) and ``R`` (m x m) are the matrices flown by default;
+    ``printed`` maps a corrected name to the paper's literal matrix.
+    """
+
+    Q: Matrix
+    R: Matrix
+    H: Matrix
+    source: str = ""
+    note: str = ""
+    printed: Mapping[str, Matrix] = field(default_factory=dict)
+    same_as: str = ""
+    mirror: bool = False
+
+    def resolved(self, mode: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(Q, R, H)`` as arrays, the printed ones where ``mode == "printed"``."""
+        pick = (lambda k: self.printed.get(k, getattr(self, k))) if mode == "printed" else (lambda k: getattr(self, k))
+        return tuple(np.array(pick(k), dtype=float) for k in ("Q", "R", "H"))  # type: ignore[return-value]
+
+
+@dataclass(frozen=True)
+class PhaseConfig:
+    """One mission phase: ``takeoff`` (ramp z to ``z_m``), ``hold``, ``circle``, ``land`` (ramp z to 0)."""
+
+    kind: str
+    duration_s: float
+    z_m: float | None = None
+    radius_m: float | None = None
+    period_s: float | None = None
+    center_m: tuple[float, float] | None = None
+
+
+@dataclass(frozen=True)
+class PdGains:
+    """PD gains (eq. 26 names); thrust gets gravity feed-forward."""
+
+    kp_z: float
+    kd_z: float
+    kp_psi: float
+    kd_psi: float
+    kp_x: float
+    kd_x: float
+    kp_y: float
+    kd_y: float
+    kp_theta: float
+    kd_theta: float
+    kp_phi: float
+    kd_phi: float
+    source: str = ""
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """``[estimator]``: process noise of the constant-velocity position filters."""
+
+    accel_noise_std_m_s2: float = 2.0
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """``[sim]``: plant integration, wind, sensors and the default number of runs."""
+
+    plant_substep_s: float = 0.001
+    runs: int = 1
+    seed: int = 0
+    wind: WindParams = field(default_factory=WindParams)
+    sensors: SensorParams = field(default_factory=SensorParams)
+
+
+@dataclass(frozen=True)
+class Config:
+    """A whole experiment configuration."""
+
+    source: str
+    experiment: ExperimentConfig
+    vehicle: ReducedParams
+    mission: tuple[PhaseConfig, ...]
+    loc: Mapping[str, MatrixSet]
+    nlsoc: Mapping[str, MatrixSet]
+    pd: PdGains
+    sim: SimConfig
+    estimator: EstimatorConfig
+    raw: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
+
+    def with_matrices(self, mode: str) -> "Config":
+        """A copy flying the ``corrected`` or the ``printed`` matrices (re-validated)."""
+        if mode not in MATRIX_MODES:
+            raise ConfigError(self.source, "experiment.matrices", f"must be one of {MATRIX_MODES}, got {mode!r}")
+        raw = {k: v for k, v in self.raw.items()}
+        raw["experiment"] = dict(raw["experiment"], matrices=mode)
+        return parse_config(raw, self.source)
+
+
+# --------------------------------------------------------------------------- loading
+
+def bundled_configs() -> list[str]:
+    """Names of the configs shipped with the package (``configs/*.toml``)."""
+    return sorted(p.name[:-5] for p in resources.files("gcs.configs").iterdir() if p.name.endswith(".toml"))
+
+
+def resolve_config_path(name_or_path: str | Path) -> Path:
+    """A path as given if it exists, else a bundled config by name (with or without ``.toml``)."""
+    p = Path(name_or_path)
+    if p.is_file():
+        return p
+    stem = p.name[:-5] if p.name.endswith(".toml") else p.name
+    candidate = resources.files("gcs.configs") / f"{stem}.toml"
+    if candidate.is_file():
+        return Path(str(candidate))
+    raise ConfigError(str(name_or_path), "", f"no such file, and not a bundled config (bundled: {', '.join(bundled_configs())})")
+
+
+def load_config(path: str | Path) -> Config:
+    """Load and validate a TOML experiment config.
+
+    Raises
+    ------
+    ConfigError
+        Naming the file, the key and the reason.
+    """
+    p = resolve_config_path(path)
+    source = str(path)
+    try:
+        with open(p, "rb") as fh:
+            raw = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(source, "", f"not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise ConfigError(source, "", f"cannot read: {exc.strerror or exc}") from None
+    return parse_config(raw, source)
+
+
+class _Reader:
+    """Takes keys out of one TOML table, then complains about whatever is left."""
+
+    def __init__(self, table: Any, source: str, where: str) -> None:
+        if not isinstance(table, dict):
+            raise ConfigError(source, where, f"must be a table, got {type(table).__name__}")
+        self.table = dict(table)
+        self.source = source
+        self.where = where
+
+    def key(self, name: str) -> str:
+        return f"{self.where}.{name}" if self.where else name
+
+    def error(self, name: str, reason: str) -> ConfigError:
+        return ConfigError(self.source, self.key(name), reason)
+
+    def has(self, name: str) -> bool:
+        return name in self.table
+
+    def raw(self, name: str, default: Any = ...) -> Any:
+        if name in self.table:
+            return self.table.pop(name)
+        if default is ...:
+            raise self.error(name, "missing")
+        return default
+
+    def number(self, name: str, default: Any = ..., *, positive: bool = False, nonneg: bool = False) -> float:
+        v = self.raw(name, default)
+        if v is None:
+            return v
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise self.error(name, f"must be a number, got {v!r}")
+        v = float(v)
+        if not math.isfinite(v):
+            raise self.error(name, f"must be finite, got {v!r}")
+        if positive and not v > 0:
+            raise self.error(name, f"must be > 0, got {v:g}")
+        if nonneg and v < 0:
+            raise self.error(name, f"must be >= 0, got {v:g}")
+        return v
+
+    def integer(self, name: str, default: Any = ..., *, minimum: int | None = None) -> int:
+        v = self.raw(name, default)
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.error(name, f"must be an integer, got {v!r}")
+        if minimum is not None and v < minimum:
+            raise self.error(name, f"must be >= {minimum}, got {v}")
+        return v
+
+    def string(self, name: str, default: Any = ..., *, choices: tuple[str, ...] | None = None) -> str:
+        v = self.raw(name, default)
+        if not isinstance(v, str):
+            raise self.error(name, f"must be a string, got {v!r}")
+        if choices is not None and v not in choices:
+            raise self.error(name, f"must be one of {', '.join(choices)}; got {v!r}")
+        return v
+
+    def boolean(self, name: str, default: Any = ...) -> bool:
+        v = self.raw(name, default)
+        if not isinstance(v, bool):
+            raise self.error(name, f"must be true or false, got {v!r}")
+        return v
+
+    def sub(self, name: str, default: Any = ...) -> "_Reader":
+        return _Reader(self.raw(name, default), self.source, self.key(name))
+
+    def done(self) -> None:
+        if self.table:
+            names = ", ".join(sorted(self.table))
+            first = sorted(self.table)[0]
+            raise self.error(first, f"unknown key{'s' if len(self.table) > 1 else ''} ({names})")
+
+
+def _matrix(reader: _Reader, name: str, n: int) -> Matrix:
+    """A number (1x1), a flat list (diagonal) or n rows of n numbers."""
+    v = reader.raw(name)
+
+    def num(x: Any) -> float:
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(float(x)):
+            raise reader.error(name, f"entries must be finite numbers, got {x!r}")
+        return float(x)
+
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        rows = [[num(v)]]
+    elif isinstance(v, list) and v and all(not isinstance(r, list) for r in v):
+        d = [num(x) for x in v]
+        rows = [[d[i] if i == j else 0.0 for j in range(len(d))] for i in range(len(d))]
+    elif isinstance(v, list) and v and all(isinstance(r, list) for r in v):
+        rows = [[num(x) for x in r] for r in v]
+    else:
+        raise reader.error(name, f"must be a number, a list (diagonal) or a list of rows; got {v!r}")
+    shape = (len(rows), {len(r) for r in rows})
+    if shape[0] != n or shape[1] != {n}:
+        cols = "/".join(str(c) for c in sorted(shape[1]))
+        raise reader.error(name, f"wrong shape: expected {n}x{n}, got {shape[0]}x{cols}")
+    return tuple(tuple(r) for r in rows)
+
+
+def _check_symmetric(reader: _Reader, name: str, mat: Matrix, *, definite: bool) -> None:
+    a = np.array(mat)
+    n = a.shape[0]
+    for i in range(n):
+        for j in range(i + 1, n):
+            if not math.isclose(a[i, j], a[j, i], rel_tol=1e-9, abs_tol=1e-12):
+                raise reader.error(name, f"not symmetric ({name}[{i + 1},{j + 1}] = {a[i, j]:g} != "
+                                         f"{name}[{j + 1},{i + 1}] = {a[j, i]:g})")
+    eig = np.linalg.eigvalsh(0.5 * (a + a.T))
+    scale = max(1.0, float(np.max(np.abs(eig))))
+    if definite and eig.min() <= 1e-12 * scale:
+        raise reader.error(name, f"not positive definite (smallest eigenvalue {eig.min():.6g})")
+    if not definite and eig.min() < -1e-9 * scale:
+        raise reader.error(name, f"indefinite (eigenvalue {eig.min():.6g} < 0); Q and H must be positive semidefinite")
+
+
+def _matrix_set(reader: _Reader, n: int, m: int, mode: str, allow_same_as: tuple[str, ...]) -> MatrixSet:
+    source = reader.string("source", "")
+    note = reader.string("note", "")
+    if reader.has("same_as"):
+        same_as = reader.string("same_as", choices=allow_same_as)
+        mirror = reader.boolean("mirror", False)
+        reader.done()
+        # Filled in by the caller from the referenced subsystem.
+        return MatrixSet(Q=(), R=(), H=(), source=source, note=note, same_as=same_as, mirror=mirror)
+    corrected = reader.raw("corrected", [])
+    if not isinstance(corrected, list) or not all(isinstance(c, str) for c in corrected):
+        raise reader.error("corrected", f"must be a list of matrix names, got {corrected!r}")
+    dims = {"Q": n, "H": n, "R": m}
+    mats = {k: _matrix(reader, k, d) for k, d in dims.items()}
+    printed: dict[str, Matrix] = {}
+    for k in corrected:
+        if k not in dims:
+            raise reader.error("corrected", f"unknown matrix {k!r} (expected Q, R or H)")
+        if not reader.has(f"{k}_printed"):
+            raise reader.error(f"{k}_printed", f"missing: {k} is listed in 'corrected', so the printed matrix must be given")
+        printed[k] = _matrix(reader, f"{k}_printed", dims[k])
+    for k in dims:
+        if reader.has(f"{k}_printed"):
+            raise reader.error(f"{k}_printed", f"given but {k!r} is not listed in 'corrected'")
+    reader.done()
+    use = {k: printed.get(k, mats[k]) if mode == "printed" else mats[k] for k in dims}
+    if mode == "corrected":
+        for k in ("Q", "H"):
+            _check_symmetric(reader, k, use[k], definite=False)
+    _check_symmetric(reader, "R" if "R" not in printed or mode == "corrected" else "R_printed", use["R"], definite=True)
+    return MatrixSet(Q=mats["Q"], R=mats["R"], H=mats["H"], source=source, note=note, printed=printed)
+
+
+def _matrix_group(reader: _Reader, dims: dict[str, tuple[int, int]], mode: str) -> dict[str, MatrixSet]:
+    out: dict[str, MatrixSet] = {}
+    for name, (n, m) in dims.items():
+        others = tuple(k for k in dims if k != name and dims[k] == (n, m))
+        out[name] = _matrix_set(reader.sub(name), n, m, mode, others)
+    reader.done()
+    for name, ms in out.items():
+        if ms.same_as:
+            ref = out[ms.same_as]
+            if ref.same_as:
+                raise reader.error(f"{name}.same_as", f"{ms.same_as!r} is itself defined by same_as")
+            out[name] = dataclasses.replace(ref, source=ms.source or ref.source, note=ms.note,
+                                            same_as=ms.same_as, mirror=ms.mirror)
+    return out
+
+
+def _phases(reader: _Reader) -> tuple[PhaseConfig, ...]:
+    raw = reader.raw("phases")
+    if not isinstance(raw, list) or not raw:
+        raise reader.error("phases", "must be a non-empty array of tables ([[mission.phases]])")
+    phases = []
+    have_z = False
+    for i, t in enumerate(raw):
+        r = _Reader(t, reader.source, f"{reader.key('phases')}[{i}]")
+        kind = r.string("kind", choices=PHASE_KINDS)
+        duration = r.number("duration_s", positive=True)
+        z = radius = period = None
+        center = None
+        if kind == "takeoff":
+            z = r.number("z_m", positive=True)
+            have_z = True
+        elif kind == "circle":
+            radius = r.number("radius_m", positive=True)
+            period = r.number("period_s", positive=True)
+            if r.has("center_m"):
+                c = r.raw("center_m")
+                if not (isinstance(c, list) and len(c) == 2 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in c)):
+                    raise r.error("center_m", f"must be [x, y] in metres, got {c!r}")
+                center = (float(c[0]), float(c[1]))
+        if kind in ("hold", "circle", "land") and not have_z:
+            raise r.error("kind", f"a {kind!r} phase needs a takeoff phase before it")
+        r.done()
+        phases.append(PhaseConfig(kind, duration, z, radius, period, center))
+    reader.done()
+    return tuple(phases)
+
+
+def parse_config(raw: Mapping[str, Any], source: str = "<config>") -> Config:
+    """Validate a parsed TOML document (see :func:`load_config`)."""
+    top = _Reader(raw, source, "")
+    for section in ("experiment", "vehicle", "mission", "loc", "nlsoc", "pd"):
+        if not top.has(section):
+            raise ConfigError(source, section, "missing section")
+
+    e = top.sub("experiment")
+    name = e.string("name")
+    description = e.string("description", "")
+    ts = e.number("ts_s")
+    if not ts > 0:
+        raise e.error("ts_s", f"must be > 0, got {ts:g}")
+    horizon = e.number("horizon_s")
+    if horizon < ts:
+        raise e.error("horizon_s", f"horizon {horizon:g} s is shorter than one step (ts_s = {ts:g} s)")
+    duration = e.number("duration_s", positive=True)
+    after = e.string("after_horizon", "pd", choices=AFTER_HORIZON)
+    mode = e.string("matrices", "corrected", choices=MATRIX_MODES)
+    zero_vel = e.boolean("zero_velocity_reference", False)
+    axes = e.raw("error_axes", ["z"])
+    if not isinstance(axes, list) or not axes or any(a not in ("x", "y", "z") for a in axes) or len(set(axes)) != len(axes):
+        raise e.error("error_axes", f"must be a non-empty list of distinct 'x', 'y', 'z'; got {axes!r}")
+    e.done()
+    experiment = ExperimentConfig(name=name, description=description, ts_s=ts, horizon_s=horizon,
+                                  duration_s=duration, after_horizon=after, matrices=mode,
+                                  zero_velocity_reference=zero_vel, error_axes=tuple(axes))
+
+    v = top.sub("vehicle")
+    defaults = ReducedParams()
+    vehicle = ReducedParams(
+        mass_kg=v.number("mass_kg", positive=True),
+        gravity_m_s2=v.number("gravity_m_s2", 9.81, positive=True),
+        max_thrust_n=v.number("max_thrust_n", defaults.max_thrust_n, positive=True),
+        max_angular_accel_rad_s2=v.number("max_angular_accel_rad_s2", defaults.max_angular_accel_rad_s2, positive=True),
+        drag_n_per_m_s=v.number("drag_n_per_m_s", defaults.drag_n_per_m_s, nonneg=True),
+    )
+    if vehicle.max_thrust_n <= vehicle.mass_kg * vehicle.gravity_m_s2:
+        raise v.error("max_thrust_n", f"{vehicle.max_thrust_n:g} N cannot lift {vehicle.mass_kg:g} kg "
+                                      f"(hover needs {vehicle.mass_kg * vehicle.gravity_m_s2:g} N)")
+    v.done()
+
+    mr = top.sub("mission")
+    mission = _phases(mr)
+
+    loc = _matrix_group(top.sub("loc"), LOC_SUBSYSTEMS, mode)
+    nlsoc = _matrix_group(top.sub("nlsoc"), NLSOC_SUBSYSTEMS, mode)
+
+    p = top.sub("pd")
+    gains = {f.name: p.number(f.name, nonneg=True) for f in dataclasses.fields(PdGains) if f.name not in ("source", "note")}
+    pd = PdGains(**gains, source=p.string("source", ""), note=p.string("note", ""))
+    p.done()
+
+    sim = SimConfig()
+    if top.has("sim"):
+        s = top.sub("sim")
+        substep = s.number("plant_substep_s", sim.plant_substep_s, positive=True)
+        if substep > ts:
+            raise s.error("plant_substep_s", f"{substep:g} s is longer than the control period ts_s = {ts:g} s")
+        runs = s.integer("runs", 1, minimum=1)
+        seed = s.integer("seed", 0, minimum=0)
+        wind = WindParams()
+        if s.has("wind"):
+            w = s.sub("wind")
+            direction = w.number("direction_deg", None)
+            wind = WindParams(mean_speed_m_s=w.number("mean_speed_m_s", 0.0, nonneg=True),
+                              direction_deg=direction,
+                              vertical_m_s=w.number("vertical_m_s", 0.0),
+                              gust_std_m_s=w.number("gust_std_m_s", 0.0, nonneg=True),
+                              gust_tau_s=w.number("gust_tau_s", 2.0, positive=True))
+            w.done()
+        sensors = SensorParams()
+        if s.has("sensors"):
+            n = s.sub("sensors")
+            sensors = SensorParams(
+                altitude=n.string("altitude", "ideal", choices=ALTITUDE_KINDS),
+                altitude_noise_std_m=n.number("altitude_noise_std_m", 0.0, nonneg=True),
+                altitude_resolution_m=n.number("altitude_resolution_m", 0.0, nonneg=True),
+                position_noise_std_m=n.number("position_noise_std_m", 0.0, nonneg=True),
+                attitude_noise_std_rad=n.number("attitude_noise_std_rad", 0.0, nonneg=True),
+                rate_noise_std_rad_s=n.number("rate_noise_std_rad_s", 0.0, nonneg=True),
+            )
+            n.done()
+        s.done()
+        sim = SimConfig(plant_substep_s=substep, runs=runs, seed=seed, wind=wind, sensors=sensors)
+    vehicle = dataclasses.replace(vehicle, max_substep_s=sim.plant_substep_s)
+
+    estimator = EstimatorConfig()
+    if top.has("estimator"):
+        est = top.sub("estimator")
+        estimator = EstimatorConfig(accel_noise_std_m_s2=est.number("accel_noise_std_m_s2", 2.0, positive=True))
+        est.done()
+
+    top.done()
+    return Config(source=source, experiment=experiment, vehicle=vehicle, mission=mission, loc=loc,
+                  nlsoc=nlsoc, pd=pd, sim=sim, estimator=estimator, raw=raw)

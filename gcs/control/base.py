@@ -1,0 +1,121 @@
+"""The one small interface every controller flies behind, and the horizon schedule.
+
+A controller is *designed* once (gain tables, validated matrices: pure
+functions in the controller modules) and then *stepped*:
+``command = controller.step(k, state, ref)`` with the control step index
+``k`` (0 at the start of the flight), the state estimate and the reference,
+both :class:`gcs.model.State` in the paper frame.  Commands are saturated to
+the vehicle limits, so what a controller returns is what the vehicle gets
+(the NLSOC lateral laws need the thrust actually applied).
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+from gcs.config import AFTER_HORIZON
+from gcs.model import Command, State
+
+__all__ = ["Controller", "Limits", "FiniteHorizonController", "StagedLaw", "steps_to_go", "wrap_angle"]
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Actuator limits: thrust in [0, max_thrust_n], each angular acceleration in +-max_angular_accel_rad_s2."""
+
+    max_thrust_n: float
+    max_angular_accel_rad_s2: float
+
+    def saturate(self, thrust_n: float, t_roll: float, t_pitch: float, t_yaw: float) -> Command:
+        """The command clipped to the limits."""
+        umax, amax = self.max_thrust_n, self.max_angular_accel_rad_s2
+        return Command(
+            0.0 if thrust_n < 0.0 else umax if thrust_n > umax else thrust_n,
+            -amax if t_roll < -amax else amax if t_roll > amax else t_roll,
+            -amax if t_pitch < -amax else amax if t_pitch > amax else t_pitch,
+            -amax if t_yaw < -amax else amax if t_yaw > amax else t_yaw,
+        )
+
+
+def wrap_angle(a: float) -> float:
+    """Angle wrapped to [-pi, pi)."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def steps_to_go(k: int, horizon_steps: int, after: str) -> int | None:
+    """Steps to go j (>= 1) at control step k, or None when the fallback flies.
+
+    Within the horizon j = N - k, so the last step (k = N - 1) has j = 1 and
+    uses the terminal weight H.  After it: ``"terminal"`` keeps j = 1,
+    ``"restart"`` starts a new horizon, ``"pd"`` returns None.
+    """
+    if k < 0:
+        raise ValueError(f"k must be >= 0, got {k}")
+    if k < horizon_steps:
+        return horizon_steps - k
+    if after == "terminal":
+        return 1
+    if after == "restart":
+        return horizon_steps - (k % horizon_steps)
+    if after == "pd":
+        return None
+    raise ValueError(f"after must be one of {AFTER_HORIZON}, got {after!r}")
+
+
+class Controller(ABC):
+    """A policy: one command from the step index, the state estimate and the reference."""
+
+    name: str = "controller"
+
+    @abstractmethod
+    def step(self, k: int, state: State, ref: State) -> Command:
+        """Command for control step ``k`` (thrust [N], angular accelerations [rad/s^2])."""
+
+    def reset(self) -> None:
+        """Forget any per-flight state (none by default)."""
+
+
+class StagedLaw(ABC):
+    """A finite-horizon law evaluated with j steps to go (j = 1 is the last step)."""
+
+    @abstractmethod
+    def step_j(self, j: int, state: State, ref: State) -> Command:
+        """Command with ``j`` steps to go."""
+
+
+class FiniteHorizonController(Controller):
+    """Runs a :class:`StagedLaw` over the horizon, then what ``after`` says.
+
+    Attributes
+    ----------
+    last_steps_to_go : int or None
+        j used by the last step (None when the fallback flew it).
+    """
+
+    def __init__(self, name: str, law: StagedLaw, horizon_steps: int, after: str, fallback: Controller | None) -> None:
+        if horizon_steps < 1:
+            raise ValueError(f"horizon_steps must be >= 1, got {horizon_steps}")
+        if after not in AFTER_HORIZON:
+            raise ValueError(f"after must be one of {AFTER_HORIZON}, got {after!r}")
+        if after == "pd" and fallback is None:
+            raise ValueError("after='pd' needs a fallback controller")
+        self.name = name
+        self.law = law
+        self.horizon_steps = horizon_steps
+        self.after = after
+        self.fallback = fallback
+        self.last_steps_to_go: int | None = None
+
+    def step(self, k: int, state: State, ref: State) -> Command:
+        j = steps_to_go(k, self.horizon_steps, self.after)
+        self.last_steps_to_go = j
+        if j is None:
+            return self.fallback.step(k, state, ref)  # type: ignore[union-attr]
+        return self.law.step_j(j, state, ref)
+
+    def reset(self) -> None:
+        self.last_steps_to_go = None
+        if self.fallback is not None:
+            self.fallback.reset()
