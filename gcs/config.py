@@ -157,11 +157,17 @@ class EstimatorConfig:
 
 @dataclass(frozen=True)
 class SimConfig:
-    """``[sim]``: plant integration, wind, sensors and the default number of runs."""
+    """``[sim]``: plant integration, wind, sensors and the default number of runs.
+
+    ``wind_enabled`` (``[sim.wind] enabled``) says whether the wind blows by
+    default: the paper's simulation columns had no disturbances, so the
+    configs describe the wind but leave it off (``gcs sim --wind`` turns it on).
+    """
 
     plant_substep_s: float = 0.001
     runs: int = 1
     seed: int = 0
+    wind_enabled: bool = False
     wind: WindParams = field(default_factory=WindParams)
     sensors: SensorParams = field(default_factory=SensorParams)
 
@@ -485,8 +491,10 @@ def parse_config(raw: Mapping[str, Any], source: str = "<config>") -> Config:
         runs = s.integer("runs", 1, minimum=1)
         seed = s.integer("seed", 0, minimum=0)
         wind = WindParams()
+        wind_enabled = False
         if s.has("wind"):
             w = s.sub("wind")
+            wind_enabled = w.boolean("enabled", True)
             direction = w.number("direction_deg", None)
             wind = WindParams(mean_speed_m_s=w.number("mean_speed_m_s", 0.0, nonneg=True),
                               direction_deg=direction,
@@ -507,7 +515,8 @@ def parse_config(raw: Mapping[str, Any], source: str = "<config>") -> Config:
             )
             n.done()
         s.done()
-        sim = SimConfig(plant_substep_s=substep, runs=runs, seed=seed, wind=wind, sensors=sensors)
+        sim = SimConfig(plant_substep_s=substep, runs=runs, seed=seed, wind_enabled=wind_enabled,
+                        wind=wind, sensors=sensors)
     vehicle = dataclasses.replace(vehicle, max_substep_s=sim.plant_substep_s)
 
     estimator = EstimatorConfig()

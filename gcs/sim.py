@@ -22,7 +22,7 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 
 from gcs.config import Config
-from gcs.control import CONTROLLERS, FiniteHorizonController, make_controller, model_params
+from gcs.control import CONTROLLERS, Controller, FiniteHorizonController, make_controller, model_params
 from gcs.estimate import StateEstimator
 from gcs.metrics import FlightRecord, controller_cost, flight_metrics, summarize
 from gcs.mission import Mission
@@ -42,12 +42,14 @@ class SimOptions:
     ----------
     duration_s : float or None
         Simulated time; None = the config's ``experiment.duration_s``.
-    wind, noise : bool
-        Use the config's wind model / sensor model (False = calm / ideal sensors).
+    wind : bool or None
+        Blow the config's wind; None = the config's ``[sim.wind] enabled``.
+    noise : bool
+        Use the config's sensor model (False = ideal sensors, true state fed back).
     """
 
     duration_s: float | None = None
-    wind: bool = True
+    wind: bool | None = None
     noise: bool = True
 
 
@@ -63,7 +65,7 @@ class SimRun:
 
 
 def simulate(config: Config, controller: str, *, run: int = 0, seed: int | None = None,
-             options: SimOptions = SimOptions()) -> SimRun:
+             options: SimOptions = SimOptions(), designed: Controller | None = None) -> SimRun:
     """Fly ``controller`` on the reduced plant for the config's mission.
 
     Parameters
@@ -76,6 +78,9 @@ def simulate(config: Config, controller: str, *, run: int = 0, seed: int | None 
     seed : int or None
         Base seed; None = ``config.sim.seed``.
     options : SimOptions
+    designed : Controller or None
+        An already designed ``controller`` for this config to reuse (it is reset);
+        None designs one.
 
     Returns
     -------
@@ -88,17 +93,22 @@ def simulate(config: Config, controller: str, *, run: int = 0, seed: int | None 
         raise ValueError(f"duration must be > 0, got {duration!r}")
     ts = e.ts_s
     steps = int(round(duration / ts))
-    ctl = make_controller(controller, config)
+    if designed is None:
+        ctl = make_controller(controller, config)
+    else:
+        ctl = designed
+        ctl.reset()
     model = model_params(config)
     mission = Mission(config.mission, zero_velocity=e.zero_velocity_reference)
     vehicle = config.vehicle
 
-    wind = Wind(config.sim.wind, np.random.default_rng([seed, run, 1])) if options.wind else None
+    blow = config.sim.wind_enabled if options.wind is None else options.wind
+    wind = Wind(config.sim.wind, np.random.default_rng([seed, run, 1])) if blow else None
     sp = config.sim.sensors
     sensors = estimator = None
     if options.noise and not sp.is_ideal:
         sensors = Sensors(sp, np.random.default_rng([seed, run, 2]))
-        pos_std = math.hypot(sp.position_noise_std_m, 0.0)
+        pos_std = sp.position_noise_std_m
         alt_std = math.sqrt(sp.altitude_noise_std_m ** 2 + sp.altitude_resolution_m ** 2 / 12.0)
         estimator = StateEstimator(ts, model, (pos_std, pos_std, alt_std), config.estimator.accel_noise_std_m_s2)
 
@@ -164,8 +174,10 @@ def run_experiment(config: Config, controllers: Sequence[str], *, runs: int | No
     result = ExperimentResult(config.experiment.name, runs, duration)
     for name in controllers:
         result.per_run[name] = []
+        designed = make_controller(name, config)
         for i in range(runs):
             if progress is not None:
                 progress(name, i, runs)
-            result.per_run[name].append(simulate(config, name, run=i, seed=seed, options=options).metrics)
+            run = simulate(config, name, run=i, seed=seed, options=options, designed=designed)
+            result.per_run[name].append(run.metrics)
     return result

@@ -124,6 +124,13 @@ def design_loc(config: Config) -> LocDesign:
     return LocDesign(ts, n, tables["z"], tables["psi"], tables["y_phi"], tables["x_theta"])
 
 
+def _settled_length(table: np.ndarray) -> int:
+    """Number of leading rows after which every row equals the last one."""
+    differs = np.any(table[:, 0, :] != table[-1, 0, :], axis=1)
+    idx = np.flatnonzero(differs)
+    return int(idx[-1]) + 2 if idx.size else 1
+
+
 class LocLaw(StagedLaw):
     """The LOC policy with j steps to go."""
 
@@ -131,19 +138,15 @@ class LocLaw(StagedLaw):
         self.design = design
         self.model = model
         self.limits = limits
-        # Plain lists of rows: a table lookup and a 2- or 4-term dot product per subsystem.
-        self._fz = design.F_z[:, 0, :].tolist()
-        self._fpsi = design.F_psi[:, 0, :].tolist()
-        self._fy = design.F_y_phi[:, 0, :].tolist()
-        self._fx = design.F_x_theta[:, 0, :].tolist()
-
-    def virtual_input(self, j: int, state: State, ref: State) -> float:
-        """u1 [m/s^2] of the exactly linearised z subsystem (for the cost of eq. 5)."""
-        fz = self._fz[j - 1]
-        return -(fz[0] * (state[2] - ref[2]) + fz[1] * (state[5] - ref[5]))
+        # Plain lists of rows (a lookup and a 2- or 4-term dot product per subsystem), cut
+        # where the recursion reached its fixed point: rows past it are all equal.
+        tables = (design.F_z, design.F_psi, design.F_y_phi, design.F_x_theta)
+        settled = max(_settled_length(t) for t in tables)
+        self._settled = settled
+        self._fz, self._fpsi, self._fy, self._fx = (t[:settled, 0, :].tolist() for t in tables)
 
     def step_j(self, j: int, state: State, ref: State) -> Command:
-        i = j - 1
+        i = (j if j < self._settled else self._settled) - 1
         phi, th = state[6], state[7]
         fz = self._fz[i]
         u1 = -(fz[0] * (state[2] - ref[2]) + fz[1] * (state[5] - ref[5]))
