@@ -1,17 +1,18 @@
-"""State estimation in the paper's frame from noisy, quantised position/attitude readings.
+"""State estimation in the paper's frame from noisy, quantised, possibly late telemetry.
 
-Each position axis runs a steady-state Kalman filter of a constant-velocity
-model driven by the acceleration the model predicts from the last command
-(thrust along the tilted body axis, minus gravity)::
+Each position axis runs a two-state Kalman filter (position, velocity) of a
+constant-velocity model driven by the acceleration the model predicts from
+the last command (thrust along the tilted body axis, minus gravity)::
 
-    predict  p- = p + T v + T^2/2 a,   v- = v + T a
-    correct  [p, v] = [p-, v-] + K (y - p-)
+    predict  p- = p + dt v + dt^2/2 a,   v- = v + dt a,   P- = F P F' + G G' sigma_a^2
+    correct  with a position reading (variance noise^2 + resolution^2 / 12)
+             and/or a velocity reading
 
-The gain K comes from the discrete algebraic Riccati equation with white
-acceleration noise (``accel_noise_std_m_s2``) and a measurement variance of
-``noise^2 + resolution^2 / 12`` (quantisation as uniform noise).  Altitude
-is known never to be below the ground (z >= 0).  Attitude and rates pass
-through (an IMU's are good enough at 100 Hz).
+``sigma_a`` (``accel_noise_std_m_s2``) covers what the model does not know
+(wind, drag, thrust error).  Predictions run every control tick; corrections
+whenever a reading arrives, so telemetry slower than the loop (or a late
+frame) is handled.  Altitude is never estimated below the ground (z >= 0).
+Attitude and Euler-angle rates are taken from the latest IMU reading.
 """
 
 from __future__ import annotations
@@ -24,35 +25,85 @@ import scipy.linalg
 
 from gcs.model import Command, ModelParams, State
 
-__all__ = ["kalman_gain_cv", "StateEstimator"]
+__all__ = ["kalman_gain_cv", "AxisFilter", "StateEstimator"]
 
 
 def kalman_gain_cv(ts: float, accel_noise_std: float, meas_std: float) -> tuple[float, float]:
-    """Steady-state Kalman gain (k_pos, k_vel) of a constant-velocity model measured in position.
-
-    Parameters
-    ----------
-    ts : float
-        Sample period [s], > 0.
-    accel_noise_std : float
-        White acceleration noise [m/s^2], > 0.
-    meas_std : float
-        Measurement noise [m], > 0.
-    """
+    """Steady-state Kalman gain (k_pos, k_vel) of a constant-velocity model measured in position."""
     if not ts > 0 or not accel_noise_std > 0 or not meas_std > 0:
         raise ValueError("ts, accel_noise_std and meas_std must be > 0")
     a = np.array([[1.0, ts], [0.0, 1.0]])
     c = np.array([[1.0, 0.0]])
     g = np.array([[0.5 * ts * ts], [ts]])
-    qw = accel_noise_std ** 2 * (g @ g.T)
-    r = np.array([[meas_std ** 2]])
-    p = scipy.linalg.solve_discrete_are(a.T, c.T, qw, r)
-    k = p @ c.T / (c @ p @ c.T + r)
+    p = scipy.linalg.solve_discrete_are(a.T, c.T, accel_noise_std ** 2 * (g @ g.T), np.array([[meas_std ** 2]]))
+    k = p @ c.T / (c @ p @ c.T + meas_std ** 2)
     return float(k[0, 0]), float(k[1, 0])
 
 
+class AxisFilter:
+    """Kalman filter of one axis: state (position [m], velocity [m/s]), covariance kept explicitly."""
+
+    def __init__(self, accel_noise_std_m_s2: float, position: float = 0.0, velocity: float = 0.0,
+                 position_var: float = 1.0, velocity_var: float = 1.0) -> None:
+        if not accel_noise_std_m_s2 > 0:
+            raise ValueError("accel_noise_std_m_s2 must be > 0")
+        self.q = accel_noise_std_m_s2 ** 2
+        self.p, self.v = position, velocity
+        self.ppp, self.ppv, self.pvv = position_var, 0.0, velocity_var
+
+    def predict(self, dt: float, accel: float) -> None:
+        """Advance by dt [s] with the known acceleration [m/s^2]."""
+        h2 = 0.5 * dt * dt
+        self.p += dt * self.v + h2 * accel
+        self.v += dt * accel
+        q = self.q
+        ppp, ppv, pvv = self.ppp, self.ppv, self.pvv
+        self.ppp = ppp + 2 * dt * ppv + dt * dt * pvv + q * h2 * h2
+        self.ppv = ppv + dt * pvv + q * h2 * dt
+        self.pvv = pvv + q * dt * dt
+
+    def correct_position(self, z: float, var: float) -> None:
+        """Fuse a position reading of variance ``var`` [m^2]."""
+        s = self.ppp + var
+        kp, kv = self.ppp / s, self.ppv / s
+        innov = z - self.p
+        self.p += kp * innov
+        self.v += kv * innov
+        ppp, ppv, pvv = self.ppp, self.ppv, self.pvv
+        self.ppp = (1 - kp) * ppp
+        self.ppv = (1 - kp) * ppv
+        self.pvv = pvv - kv * ppv
+
+    def correct_velocity(self, z: float, var: float) -> None:
+        """Fuse a velocity reading of variance ``var`` [(m/s)^2]."""
+        s = self.pvv + var
+        kp, kv = self.ppv / s, self.pvv / s
+        innov = z - self.v
+        self.p += kp * innov
+        self.v += kv * innov
+        ppp, ppv, pvv = self.ppp, self.ppv, self.pvv
+        self.ppp = ppp - kp * ppv
+        self.ppv = ppv - kp * pvv
+        self.pvv = (1 - kv) * pvv
+
+
+def model_acceleration(model: ModelParams, command: Command | None, roll: float, pitch: float) -> tuple[float, float, float]:
+    """Acceleration [m/s^2] (paper frame) of the reduced model under ``command`` (zero for None)."""
+    if command is None:
+        return (0.0, 0.0, 0.0)
+    um = command[0] / model.mass_kg
+    cp = math.cos(pitch)
+    return (-um * math.sin(pitch), um * cp * math.sin(roll), um * cp * math.cos(roll) - model.gravity_m_s2)
+
+
 class StateEstimator:
-    """Position/velocity filters on x, y, z plus attitude pass-through.
+    """Position/velocity filters on x, y, z plus attitude from the IMU.
+
+    Two ways to drive it:
+
+    * :meth:`update` with one full reading per control period (the in-process simulation);
+    * :meth:`predict` every tick, :meth:`correct_position`, :meth:`correct_velocity` and
+      :meth:`set_attitude` whenever telemetry arrives, then :meth:`state` (the flight loop).
 
     Parameters
     ----------
@@ -60,51 +111,80 @@ class StateEstimator:
         Control period [s].
     model : ModelParams
     position_std_m : (float, float, float)
-        Effective measurement noise of x, y, z [m] (include quantisation).
+        Measurement noise of x, y, z [m] used by :meth:`update` (include quantisation).
     accel_noise_std_m_s2 : float
-        Process noise: unmodelled acceleration (wind, drag, model error).
+        Process noise: unmodelled acceleration.
     """
 
     def __init__(self, ts: float, model: ModelParams, position_std_m: Sequence[float], accel_noise_std_m_s2: float) -> None:
         self.ts = ts
         self.model = model
-        stds = [max(float(s), 1e-4) for s in position_std_m]
-        self.gains = [kalman_gain_cv(ts, accel_noise_std_m_s2, s) for s in stds]
+        self.position_var = [max(float(s), 1e-4) ** 2 for s in position_std_m]
+        self.accel_noise_std_m_s2 = accel_noise_std_m_s2
         self.reset()
 
     def reset(self) -> None:
-        """Forget the estimate; the next reading initialises it."""
-        self._pos: list[float] | None = None
-        self._vel = [0.0, 0.0, 0.0]
+        """Forget the estimate; the next position reading initialises it."""
+        self.axes: list[AxisFilter] | None = None
+        self.attitude = (0.0,) * 6
+
+    def predict(self, dt: float, last_command: Command | None) -> None:
+        """Advance the filters by dt [s] under the command applied meanwhile."""
+        if self.axes is None:
+            return
+        acc = model_acceleration(self.model, last_command, self.attitude[0], self.attitude[1])
+        for f, a in zip(self.axes, acc):
+            f.predict(dt, a)
+        self._clamp_ground()
+
+    def correct_position(self, pos: Sequence[float], var: Sequence[float] | None = None) -> None:
+        """Fuse a position reading (x, y, z up) [m]; the first one initialises the filters."""
+        var = self.position_var if var is None else var
+        if self.axes is None:
+            self.axes = [AxisFilter(self.accel_noise_std_m_s2, p, 0.0, v, 1.0) for p, v in zip(pos, var)]
+            self._clamp_ground()
+            return
+        for f, z, v in zip(self.axes, pos, var):
+            f.correct_position(z, v)
+        self._clamp_ground()
+
+    def correct_velocity(self, vel: Sequence[float], var: Sequence[float]) -> None:
+        """Fuse a velocity reading (paper frame) [m/s]."""
+        if self.axes is None:
+            return
+        for f, z, v in zip(self.axes, vel, var):
+            f.correct_velocity(z, v)
+        self._clamp_ground()
+
+    def set_attitude(self, roll: float, pitch: float, yaw: float, roll_rate: float, pitch_rate: float, yaw_rate: float) -> None:
+        """Latest attitude [rad] and Euler-angle rates [rad/s]."""
+        self.attitude = (roll, pitch, yaw, roll_rate, pitch_rate, yaw_rate)
+
+    def _clamp_ground(self) -> None:
+        fz = self.axes[2]  # type: ignore[index]
+        if fz.p < 0.0:
+            fz.p = 0.0
+            if fz.v < 0.0:
+                fz.v = 0.0
+
+    @property
+    def initialised(self) -> bool:
+        return self.axes is not None
+
+    def state(self) -> State:
+        """The current estimate (zeros before the first position reading)."""
+        if self.axes is None:
+            return State(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, *self.attitude)
+        x, y, z = self.axes
+        return State(x.p, y.p, z.p, x.v, y.v, z.v, *self.attitude)
 
     def update(self, reading: Sequence[float], last_command: Command | None) -> State:
-        """New estimate from a reading ``(x, y, z, roll, pitch, yaw, roll_rate, pitch_rate, yaw_rate)``.
+        """One control period: reading ``(x, y, z, roll, pitch, yaw, roll_rate, pitch_rate, yaw_rate)``.
 
         ``last_command`` is the command applied since the previous reading (None at the start).
         """
-        y = reading
-        if self._pos is None:
-            self._pos = [y[0], y[1], max(y[2], 0.0)]
-        else:
-            ts = self.ts
-            if last_command is not None:
-                phi, th = y[3], y[4]
-                um = last_command[0] / self.model.mass_kg
-                acc = (-um * math.sin(th), um * math.cos(th) * math.sin(phi),
-                       um * math.cos(th) * math.cos(phi) - self.model.gravity_m_s2)
-            else:
-                acc = (0.0, 0.0, 0.0)
-            for i in range(3):
-                p = self._pos[i] + ts * self._vel[i] + 0.5 * ts * ts * acc[i]
-                v = self._vel[i] + ts * acc[i]
-                kp, kv = self.gains[i]
-                innov = y[i] - p
-                self._pos[i] = p + kp * innov
-                self._vel[i] = v + kv * innov
-            if self._pos[2] < 0.0:
-                self._pos[2] = 0.0
-                if self._vel[2] < 0.0:
-                    self._vel[2] = 0.0
-        px, py, pz = self._pos
-        vx, vy, vz = self._vel
-        return State(px, py, pz, vx, vy, vz, y[3], y[4], y[5], y[6], y[7], y[8])
+        if self.axes is not None:
+            self.predict(self.ts, last_command)
+        self.correct_position((reading[0], reading[1], reading[2]))
+        self.set_attitude(*reading[3:9])
+        return self.state()

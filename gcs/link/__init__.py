@@ -1,0 +1,1 @@
+"""Links to the vehicle: MAVLink connections and the link budget."""
