@@ -5,6 +5,8 @@ Subcommands:
 * ``gcs sim``: fly the paper's controllers on the in-process simulation and print
   a table like the paper's Tables 1, 2 and 4 (``--json`` for machines).
 * ``gcs configs``: list the bundled experiment configs.
+* ``gcs link-budget``: MAVLink 2 bytes per second each way over a serial link
+  (exit 1 when it does not fit, with configurations that do).
 
 Errors the user can cause print one line ``gcs: error: ...`` and exit non-zero
 (2 for a bad config or option); no traceback.
@@ -40,24 +42,20 @@ METRIC_LABELS = {
 }
 
 
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
-    return v
+def _int_at_least(minimum: int):
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+        if v < minimum:
+            raise argparse.ArgumentTypeError(f"must be >= {minimum}, got {v}")
+        return v
+    return parse
 
 
-def _nonneg_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {v}")
-    return v
+_positive_int = _int_at_least(1)
+_nonneg_int = _int_at_least(0)
 
 
 def _positive_float(text: str) -> float:
@@ -103,6 +101,20 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
 
     sub.add_parser("configs", help="list the bundled experiment configs")
+
+    b = sub.add_parser("link-budget", help="bytes per second each way of the 100 Hz exchange over a serial link",
+                       description="Compute the MAVLink 2 link budget of the control exchange at a baud rate: "
+                                   "telemetry down, setpoints up, housekeeping both ways.")
+    b.add_argument("--baud", type=_positive_int, default=57600, help="serial baud rate, 8N1 (default 57600)")
+    b.add_argument("--rate", type=_positive_float, default=100.0, help="control rate [Hz] (default 100)")
+    b.add_argument("--telemetry-rate", type=_positive_float, help="ATTITUDE/LOCAL_POSITION_NED rate [Hz] (default: --rate)")
+    b.add_argument("--output", choices=("attitude", "rates", "actuator"), default="attitude",
+                   help="setpoint message (SET_ATTITUDE_TARGET or SET_ACTUATOR_CONTROL_TARGET)")
+    b.add_argument("--signed", action="store_true", help="MAVLink 2 signing (+13 bytes a frame)")
+    b.add_argument("--air-rate", type=_positive_float, metavar="BPS",
+                   help="telemetry radio air data rate [bit/s] (half duplex, shared by both directions)")
+    b.add_argument("--ecc", action="store_true", help="radio error correction on (halves the air throughput)")
+    b.add_argument("--max-utilisation", type=_positive_float, default=0.8, help="largest usable share (default 0.8)")
     return p
 
 
@@ -137,8 +149,8 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         print(f"\r  flying {name:<14} run {i + 1}/{n}", end="", file=sys.stderr, flush=True)
 
     result = run_experiment(config, controllers, runs=args.runs, seed=args.seed, options=options,
-                            progress=None if (args.quiet or args.json) else progress)
-    if not (args.quiet or args.json):
+                            progress=None if (args.quiet or args.json or not sys.stderr.isatty()) else progress)
+    if not (args.quiet or args.json or not sys.stderr.isatty()):
         print("\r" + " " * 40 + "\r", end="", file=sys.stderr, flush=True)
     doc = result.to_json()
     if args.json:
@@ -146,11 +158,30 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         return 0
     e = config.experiment
     blow = config.sim.wind_enabled if args.wind is None else args.wind
+    w = config.sim.wind
+    wind = f"wind {w.mean_speed_m_s:g} m/s + gusts {w.gust_std_m_s:g} m/s" if blow else "wind off"
     sensors = "ideal" if (args.no_noise or config.sim.sensors.is_ideal) else config.sim.sensors.altitude
     title = (f"{e.name}: {result.runs} run(s) x {result.duration_s:g} s, Ts = {e.ts_s * 1000:g} ms, "
              f"horizon {e.horizon_s:g} s then {e.after_horizon}, matrices {e.matrices}, "
-             f"wind {'on' if blow else 'off'}, sensors {sensors}")
+             f"{wind}, sensors {sensors}")
     print(format_table(doc, title))
+    return 0
+
+
+def _cmd_link_budget(args: argparse.Namespace) -> int:
+    from gcs.link.budget import compute_budget, control_streams, format_budget, suggest_fixes
+
+    if args.max_utilisation > 1:
+        raise ConfigError("--max-utilisation", "", f"must be <= 1, got {args.max_utilisation:g}")
+    streams = control_streams(args.rate, args.telemetry_rate, args.output)
+    budget = compute_budget(streams, args.baud, signed=args.signed, max_utilisation=args.max_utilisation,
+                            air_rate_bps=args.air_rate, ecc=args.ecc)
+    print(format_budget(budget))
+    if not budget.fits:
+        print("configurations that fit:")
+        for fix in suggest_fixes(budget, args.rate, args.output):
+            print(f"  {fix}")
+        return 1
     return 0
 
 
@@ -161,6 +192,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == "sim":
             return _cmd_sim(args)
+        if args.command == "link-budget":
+            return _cmd_link_budget(args)
         if args.command == "configs":
             for name in bundled_configs():
                 print(f"{name:20s} {load_config(name).experiment.description}")

@@ -36,11 +36,13 @@ from sitl.wind import WindParams
 
 __all__ = [
     "Config", "ExperimentConfig", "MatrixSet", "PhaseConfig", "PdGains", "SimConfig",
-    "EstimatorConfig", "load_config", "parse_config", "resolve_config_path", "bundled_configs",
+    "EstimatorConfig", "FlightConfig", "load_config", "parse_config", "resolve_config_path", "bundled_configs",
     "AFTER_HORIZON", "MATRIX_MODES", "PHASE_KINDS",
 ]
 
 AFTER_HORIZON = ("pd", "terminal", "restart")
+#: Longest horizon in steps (a LOC gain table row per step; 10^7 steps = 28 h at 10 ms).
+MAX_HORIZON_STEPS = 10_000_000
 MATRIX_MODES = ("corrected", "printed")
 PHASE_KINDS = ("takeoff", "hold", "circle", "land")
 
@@ -173,6 +175,50 @@ class SimConfig:
 
 
 @dataclass(frozen=True)
+class FlightConfig:
+    """``[flight]``: what ``gcs fly`` needs beyond the experiment (all optional, SI units).
+
+    Attributes
+    ----------
+    output : {"attitude", "rates", "actuator"}
+        Setpoint message (see :mod:`gcs.flight.output`).
+    telemetry_rate_hz : float
+        Rate requested for ATTITUDE and LOCAL_POSITION_NED.
+    telemetry_stale_s : float
+        Telemetry older than this triggers the link-loss failsafe.
+    max_tilt_deg, fence_half_width_m, ceiling_m : float
+        Safety envelope: tilt limit, geofence box half-width around takeoff, altitude ceiling.
+    rate_gain_1_s : (3,) float
+        The autopilot's rate-loop gain (angular acceleration per rate error), roll/pitch/yaw.
+    inertia_kg_m2, max_torque_nm : (3,) float
+        For the actuator output: torque = I alpha, normalised by the maximum torque.
+    position_std_m, velocity_std_m_s : float
+        Noise assumed for LOCAL_POSITION_NED in the estimator.
+    landing_speed_m_s : float
+        Descent rate of the controlled landing after Ctrl-C.
+    min_battery_v : float
+        Preflight: refuse to arm below this voltage (0 = no check).
+    land_timeout_s : float
+        How long to wait for touchdown and disarm at the end.
+    """
+
+    output: str = "attitude"
+    telemetry_rate_hz: float = 100.0
+    telemetry_stale_s: float = 0.3
+    max_tilt_deg: float = 35.0
+    fence_half_width_m: float = 20.0
+    ceiling_m: float = 10.0
+    rate_gain_1_s: tuple[float, float, float] = (25.0, 25.0, 10.0)
+    inertia_kg_m2: tuple[float, float, float] = (0.010, 0.010, 0.018)
+    max_torque_nm: tuple[float, float, float] = (1.949, 1.949, 0.196)
+    position_std_m: float = 0.05
+    velocity_std_m_s: float = 0.05
+    landing_speed_m_s: float = 0.5
+    min_battery_v: float = 10.5
+    land_timeout_s: float = 30.0
+
+
+@dataclass(frozen=True)
 class Config:
     """A whole experiment configuration."""
 
@@ -185,6 +231,7 @@ class Config:
     pd: PdGains
     sim: SimConfig
     estimator: EstimatorConfig
+    flight: FlightConfig = field(default_factory=FlightConfig)
     raw: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     def with_matrices(self, mode: str) -> "Config":
@@ -208,6 +255,8 @@ def resolve_config_path(name_or_path: str | Path) -> Path:
     p = Path(name_or_path)
     if p.is_file():
         return p
+    if p.parent != Path("."):
+        raise ConfigError(str(name_or_path), "", "no such file")
     stem = p.name[:-5] if p.name.endswith(".toml") else p.name
     candidate = resources.files("gcs.configs") / f"{stem}.toml"
     if candidate.is_file():
@@ -228,7 +277,7 @@ def load_config(path: str | Path) -> Config:
     try:
         with open(p, "rb") as fh:
             raw = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(source, "", f"not valid TOML: {exc}") from None
     except OSError as exc:
         raise ConfigError(source, "", f"cannot read: {exc.strerror or exc}") from None
@@ -349,11 +398,14 @@ def _check_symmetric(reader: _Reader, name: str, mat: Matrix, *, definite: bool)
         raise reader.error(name, f"indefinite (eigenvalue {eig.min():.6g} < 0); Q and H must be positive semidefinite")
 
 
-def _matrix_set(reader: _Reader, n: int, m: int, mode: str, allow_same_as: tuple[str, ...]) -> MatrixSet:
+def _matrix_set(reader: _Reader, n: int, m: int, mode: str, allow_same_as: tuple[str, ...],
+                allow_mirror: bool) -> MatrixSet:
     source = reader.string("source", "")
     note = reader.string("note", "")
     if reader.has("same_as"):
         same_as = reader.string("same_as", choices=allow_same_as)
+        if reader.has("mirror") and not allow_mirror:
+            raise reader.error("mirror", "only NLSOC mirrors x-theta weights (LOC has the sign in A(2,3))")
         mirror = reader.boolean("mirror", False)
         reader.done()
         # Filled in by the caller from the referenced subsystem.
@@ -374,19 +426,24 @@ def _matrix_set(reader: _Reader, n: int, m: int, mode: str, allow_same_as: tuple
         if reader.has(f"{k}_printed"):
             raise reader.error(f"{k}_printed", f"given but {k!r} is not listed in 'corrected'")
     reader.done()
-    use = {k: printed.get(k, mats[k]) if mode == "printed" else mats[k] for k in dims}
-    if mode == "corrected":
-        for k in ("Q", "H"):
-            _check_symmetric(reader, k, use[k], definite=False)
-    _check_symmetric(reader, "R" if "R" not in printed or mode == "corrected" else "R_printed", use["R"], definite=True)
+    # The printed matrices are flown as printed (erratum 7: they fail these checks by construction);
+    # every other matrix is checked in both modes.
+    for k in ("Q", "H"):
+        if not (mode == "printed" and k in printed):
+            _check_symmetric(reader, k, mats[k], definite=False)
+    if mode == "printed" and "R" in printed:
+        _check_symmetric(reader, "R_printed", printed["R"], definite=True)
+    else:
+        _check_symmetric(reader, "R", mats["R"], definite=True)
     return MatrixSet(Q=mats["Q"], R=mats["R"], H=mats["H"], source=source, note=note, printed=printed)
 
 
-def _matrix_group(reader: _Reader, dims: dict[str, tuple[int, int]], mode: str) -> dict[str, MatrixSet]:
+def _matrix_group(reader: _Reader, dims: dict[str, tuple[int, int]], mode: str, *,
+                  allow_mirror: bool) -> dict[str, MatrixSet]:
     out: dict[str, MatrixSet] = {}
     for name, (n, m) in dims.items():
         others = tuple(k for k in dims if k != name and dims[k] == (n, m))
-        out[name] = _matrix_set(reader.sub(name), n, m, mode, others)
+        out[name] = _matrix_set(reader.sub(name), n, m, mode, others, allow_mirror)
     reader.done()
     for name, ms in out.items():
         if ms.same_as:
@@ -445,7 +502,14 @@ def parse_config(raw: Mapping[str, Any], source: str = "<config>") -> Config:
     horizon = e.number("horizon_s")
     if horizon < ts:
         raise e.error("horizon_s", f"horizon {horizon:g} s is shorter than one step (ts_s = {ts:g} s)")
+    steps = horizon / ts
+    if abs(steps - round(steps)) > 1e-6 * max(1.0, steps):
+        raise e.error("horizon_s", f"{horizon:g} s is not a whole number of steps of ts_s = {ts:g} s")
+    if round(steps) > MAX_HORIZON_STEPS:
+        raise e.error("horizon_s", f"{round(steps):.3g} steps; at most {MAX_HORIZON_STEPS:.0e} are supported")
     duration = e.number("duration_s", positive=True)
+    if duration < ts:
+        raise e.error("duration_s", f"{duration:g} s is shorter than one step (ts_s = {ts:g} s)")
     after = e.string("after_horizon", "pd", choices=AFTER_HORIZON)
     mode = e.string("matrices", "corrected", choices=MATRIX_MODES)
     zero_vel = e.boolean("zero_velocity_reference", False)
@@ -474,8 +538,8 @@ def parse_config(raw: Mapping[str, Any], source: str = "<config>") -> Config:
     mr = top.sub("mission")
     mission = _phases(mr)
 
-    loc = _matrix_group(top.sub("loc"), LOC_SUBSYSTEMS, mode)
-    nlsoc = _matrix_group(top.sub("nlsoc"), NLSOC_SUBSYSTEMS, mode)
+    loc = _matrix_group(top.sub("loc"), LOC_SUBSYSTEMS, mode, allow_mirror=False)
+    nlsoc = _matrix_group(top.sub("nlsoc"), NLSOC_SUBSYSTEMS, mode, allow_mirror=True)
 
     p = top.sub("pd")
     gains = {f.name: p.number(f.name, nonneg=True) for f in dataclasses.fields(PdGains) if f.name not in ("source", "note")}
@@ -525,6 +589,45 @@ def parse_config(raw: Mapping[str, Any], source: str = "<config>") -> Config:
         estimator = EstimatorConfig(accel_noise_std_m_s2=est.number("accel_noise_std_m_s2", 2.0, positive=True))
         est.done()
 
+    flight = FlightConfig()
+    if top.has("flight"):
+        flight = _flight(top.sub("flight"), flight)
+    top_z = max(ph.z_m for ph in mission if ph.z_m is not None)
+    if flight.ceiling_m <= top_z:
+        raise ConfigError(source, "flight.ceiling_m", f"{flight.ceiling_m:g} m is not above the mission's "
+                                                       f"highest set point ({top_z:g} m)")
+
     top.done()
     return Config(source=source, experiment=experiment, vehicle=vehicle, mission=mission, loc=loc,
-                  nlsoc=nlsoc, pd=pd, sim=sim, estimator=estimator, raw=raw)
+                  nlsoc=nlsoc, pd=pd, sim=sim, estimator=estimator, flight=flight, raw=raw)
+
+
+def _vector3(reader: _Reader, name: str, default: tuple[float, float, float]) -> tuple[float, float, float]:
+    v = reader.raw(name, list(default))
+    if not (isinstance(v, list) and len(v) == 3 and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                        and math.isfinite(x) and x > 0 for x in v)):
+        raise reader.error(name, f"must be three positive numbers (roll, pitch, yaw), got {v!r}")
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
+def _flight(f: _Reader, d: FlightConfig) -> FlightConfig:
+    out = FlightConfig(
+        output=f.string("output", d.output, choices=("attitude", "rates", "actuator")),
+        telemetry_rate_hz=f.number("telemetry_rate_hz", d.telemetry_rate_hz, positive=True),
+        telemetry_stale_s=f.number("telemetry_stale_s", d.telemetry_stale_s, positive=True),
+        max_tilt_deg=f.number("max_tilt_deg", d.max_tilt_deg, positive=True),
+        fence_half_width_m=f.number("fence_half_width_m", d.fence_half_width_m, positive=True),
+        ceiling_m=f.number("ceiling_m", d.ceiling_m, positive=True),
+        rate_gain_1_s=_vector3(f, "rate_gain_1_s", d.rate_gain_1_s),
+        inertia_kg_m2=_vector3(f, "inertia_kg_m2", d.inertia_kg_m2),
+        max_torque_nm=_vector3(f, "max_torque_nm", d.max_torque_nm),
+        position_std_m=f.number("position_std_m", d.position_std_m, positive=True),
+        velocity_std_m_s=f.number("velocity_std_m_s", d.velocity_std_m_s, positive=True),
+        landing_speed_m_s=f.number("landing_speed_m_s", d.landing_speed_m_s, positive=True),
+        min_battery_v=f.number("min_battery_v", d.min_battery_v, nonneg=True),
+        land_timeout_s=f.number("land_timeout_s", d.land_timeout_s, positive=True),
+    )
+    if out.max_tilt_deg >= 90:
+        raise f.error("max_tilt_deg", f"must be < 90, got {out.max_tilt_deg:g}")
+    f.done()
+    return out

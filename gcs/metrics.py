@@ -20,7 +20,9 @@ Per flight (``K`` control steps, ``k = 0 .. K-1``; the record holds K + 1 states
 ``J_e_setpoint``
     ``sum ||[z_setpoint - z, -vz]||``: against the final altitude set point (Table 1, erratum 11).
 ``steady_state_error_m``
-    Mean of (reference z - z) over the last second of the last hold or circle phase.
+    Mean of (reference z - z) over the last second of the last hold or circle phase,
+    or over the last second of the flight when the flight ends before the hold does
+    (``gcs sim --duration``); a flight cut during the takeoff ramp measures ramp lag.
 ``overshoot_m``
     ``max(0, max z - z_setpoint)`` before landing.
 ``rms_error_m``
@@ -31,7 +33,6 @@ Figures are in SI units (the paper's tables appear to use centimetres for J_e).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Iterable, Mapping
 
@@ -39,7 +40,7 @@ import numpy as np
 
 from gcs.config import Config
 from gcs.mission import Mission
-from gcs.model import SUBSYSTEMS
+from gcs.model import MIN_TILT_COS, SUBSYSTEMS
 
 __all__ = ["FlightRecord", "CostSpec", "controller_cost", "flight_metrics", "summarize", "METRICS", "AXIS_INDEX"]
 
@@ -108,7 +109,7 @@ def _quadratic_cost(rec: FlightRecord, cost: CostSpec, mass_kg: float, g: float)
     k = rec.command.shape[0]
     m_steps = min(cost.horizon_steps, k)
     s, r = rec.state, rec.ref
-    cc = np.maximum(np.cos(s[:, 6]) * np.cos(s[:, 7]), 0.2)
+    cc = np.maximum(np.cos(s[:, 6]) * np.cos(s[:, 7]), MIN_TILT_COS)
     if cost.kind == "loc":
         idx = list(SUBSYSTEMS["z"])
         x = s[:, idx] - r[:, idx]
@@ -116,7 +117,7 @@ def _quadratic_cost(rec: FlightRecord, cost: CostSpec, mass_kg: float, g: float)
     else:
         idx = list(SUBSYSTEMS["z_psi"])
         x = s[:, idx] - r[:, idx]
-        x[:, 2] = (x[:, 2] + math.pi) % (2 * math.pi) - math.pi
+        x[:, 2] = (x[:, 2] + np.pi) % (2 * np.pi) - np.pi  # as gcs.control.base.wrap_angle
         thrust = rec.command[:, 0] - (mass_kg * g / cc[:-1] if cost.gravity_compensated else 0.0)
         u = np.column_stack([thrust, rec.command[:, 3]])
     xs, us = x[:m_steps], u[:m_steps]
@@ -153,9 +154,10 @@ def flight_metrics(rec: FlightRecord, config: Config, mission: Mission, cost: Co
     out["J_e"] = float(np.linalg.norm(err, axis=1).sum())
     out["J_e_setpoint"] = float(np.hypot(z_sp - s[:, 2], s[:, 5]).sum())
     lo, hi = mission.hold_window(1.0)
+    if t[-1] + rec.ts_s < hi - 1e-9:
+        # The flight ended before the hold did: the steady state is the end of the flight.
+        lo, hi = t[-1] + rec.ts_s - 1.0, t[-1] + rec.ts_s
     mask = _window(t, lo, hi)
-    if not mask.any():
-        mask = _window(t, t[-1] - 1.0, t[-1] + 1.0)
     out["steady_state_error_m"] = float(np.mean(r[mask, 2] - s[mask, 2]))
     f_lo, f_hi = mission.flight_window()
     fmask = _window(t, f_lo, f_hi)

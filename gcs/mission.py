@@ -5,9 +5,11 @@ one's reference ends:
 
 * ``takeoff``: ramp z linearly to ``z_m`` over ``duration_s`` (constant climb rate);
 * ``hold``: hold the position;
-* ``circle``: counter-clockwise circle of ``radius_m`` in x-y at the held altitude,
-  one lap per ``period_s``, centred on ``center_m`` (default: ``radius_m`` behind
-  the start point along -x, so the circle starts where the vehicle is);
+* ``circle``: circle of ``radius_m`` in x-y at the held altitude, one lap per
+  ``period_s``, turning from +x (north) towards +y (east) — clockwise seen from
+  above, as the frame is north-east-up — centred on ``center_m`` (default:
+  ``radius_m`` behind the start point along -x, so the circle starts where the
+  vehicle is);
 * ``land``: ramp z linearly to 0 over ``duration_s``.
 
 After the last phase the final reference is held.  Reference velocities are

@@ -22,6 +22,7 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 
 from gcs.config import Config
+from gcs.errors import GcsError
 from gcs.control import CONTROLLERS, Controller, FiniteHorizonController, make_controller, model_params
 from gcs.estimate import StateEstimator
 from gcs.metrics import FlightRecord, controller_cost, flight_metrics, summarize
@@ -29,9 +30,18 @@ from gcs.mission import Mission
 from gcs.model import State
 from sitl import reduced
 from sitl.sensors import Sensors
-from sitl.wind import Wind
+from sitl.wind import Wind, WindParams
 
-__all__ = ["SimOptions", "SimRun", "simulate", "run_experiment", "ExperimentResult"]
+__all__ = ["SimOptions", "SimRun", "SimError", "simulate", "run_experiment", "ExperimentResult"]
+
+#: Longest simulated flight in control steps (a week at 10 ms).
+MAX_STEPS = 60_480_000
+
+
+class SimError(GcsError, ValueError):
+    """A simulation cannot be run with the options given."""
+
+    exit_code = 2
 
 
 @dataclass(frozen=True)
@@ -89,9 +99,9 @@ def simulate(config: Config, controller: str, *, run: int = 0, seed: int | None 
     e = config.experiment
     seed = config.sim.seed if seed is None else seed
     duration = e.duration_s if options.duration_s is None else options.duration_s
-    if not duration > 0:
-        raise ValueError(f"duration must be > 0, got {duration!r}")
     ts = e.ts_s
+    if not (duration >= ts and math.isfinite(duration)) or duration / ts > MAX_STEPS:
+        raise SimError(f"duration must be between one step ({ts:g} s) and {MAX_STEPS * ts:g} s, got {duration!r}")
     steps = int(round(duration / ts))
     if designed is None:
         ctl = make_controller(controller, config)
@@ -103,6 +113,8 @@ def simulate(config: Config, controller: str, *, run: int = 0, seed: int | None 
     vehicle = config.vehicle
 
     blow = config.sim.wind_enabled if options.wind is None else options.wind
+    if blow and options.wind and config.sim.wind == WindParams():
+        raise SimError(f"{config.source}: --wind asked for, but the config describes no wind ([sim.wind])")
     wind = Wind(config.sim.wind, np.random.default_rng([seed, run, 1])) if blow else None
     sp = config.sim.sensors
     sensors = estimator = None
@@ -166,10 +178,10 @@ def run_experiment(config: Config, controllers: Sequence[str], *, runs: int | No
     """Fly every controller ``runs`` times (seeds ``(seed, i)``) and collect metrics."""
     for name in controllers:
         if name not in CONTROLLERS:
-            raise ValueError(f"unknown controller {name!r}")
+            raise SimError(f"unknown controller {name!r}")
     runs = config.sim.runs if runs is None else runs
     if runs < 1:
-        raise ValueError(f"runs must be >= 1, got {runs}")
+        raise SimError(f"runs must be >= 1, got {runs}")
     duration = config.experiment.duration_s if options.duration_s is None else options.duration_s
     result = ExperimentResult(config.experiment.name, runs, duration)
     for name in controllers:

@@ -7,6 +7,7 @@ resolution (indoor rig).  A reading is ``quantise(true + noise)``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import NamedTuple, Sequence
 
@@ -86,7 +87,9 @@ class Sensors:
         z = state[2] + noise[2]
         res = self.params.altitude_resolution_m
         if res > 0.0:
-            z = round(z / res) * res
+            z = math.floor(z / res + 0.5) * res
+        if self.params.altitude == "ultrasonic" and z < 0.0:
+            z = 0.0  # a range sensor reads no negative distance
         return Measurement(
             state[0] + noise[0], state[1] + noise[1], z,
             state[6] + noise[3], state[7] + noise[4], state[8] + noise[5],

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from gcs.control import make_controller
-from gcs.model import State
+from gcs.model import Command, State
 from gcs.sim import SimOptions, run_experiment, simulate
 
 CONTROLLERS = ["nlsoc", "loc", "pd"]
@@ -99,7 +99,8 @@ def test_controllers_reset_and_share_the_interface(outdoor):
     for name in ("nlsoc", "nlsoc-literal", "loc", "pd"):
         ctl = make_controller(name, outdoor)
         cmd = ctl.step(0, State(), State())
-        assert len(cmd) == 4
+        assert isinstance(cmd, Command) and all(np.isfinite(cmd))
+        assert 0.0 <= cmd.thrust_n <= outdoor.vehicle.max_thrust_n
         ctl.reset()
 
 
@@ -115,6 +116,31 @@ def test_cli_json_schema():
             assert set(metrics[key]) == {"mean", "std"}
             assert isinstance(metrics[key]["mean"], float)
     assert "J" not in doc["results"]["pd"] and "J" in doc["results"]["loc"]
+
+
+def test_loc_terminal_policy_is_the_one_step_gain(outdoor):
+    # "terminal" keeps the last step's law: for LOC F(1) = (R + B'HB)^-1 B'HA, which with
+    # eq. 23's H has no position feedback (documented in the README).
+    exp = dataclasses.replace(outdoor.experiment, horizon_s=1.0, after_horizon="terminal")
+    ctl = make_controller("loc", dataclasses.replace(outdoor, experiment=exp))
+    far = ctl.step(500, State(z=1.0), State(z=2.0))
+    near = ctl.step(501, State(z=1.9), State(z=2.0))
+    assert far.thrust_n == pytest.approx(near.thrust_n) == pytest.approx(9.81)
+    restart = make_controller("loc", dataclasses.replace(outdoor, experiment=dataclasses.replace(exp, after_horizon="restart")))
+    assert restart.step(100, State(z=1.0), State(z=2.0)).thrust_n > 20.0
+
+
+def test_cli_rejects_short_durations_and_printed_matrices_fly():
+    p = subprocess.run([sys.executable, "-m", "gcs.cli", "sim", "--config", "indoor-4dof", "--duration", "0.004"],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2 and "duration" in p.stderr and "Traceback" not in p.stderr
+    p = subprocess.run([sys.executable, "-m", "gcs.cli", "sim", "--config", "outdoor-altitude", "--controller", "nlsoc",
+                        "--matrices", "printed", "--runs", "1", "--duration", "2", "--json"],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    p = subprocess.run([sys.executable, "-m", "gcs.cli", "sim", "--config", "indoor-4dof", "--wind", "--duration", "1"],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2 and "describes no wind" in p.stderr
 
 
 def test_cli_table():

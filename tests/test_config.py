@@ -107,8 +107,36 @@ def test_printed_q_rejected_unless_printed_mode_is_asked_for(raw):
     zp["Q"] = zp.pop("Q_printed")
     zp["corrected"] = []
     reject(doc, "nlsoc.z_psi.Q", "not symmetric (Q[3,4] = 17000 != Q[4,3] = 17500)")
-    doc["experiment"]["matrices"] = "printed"
-    assert parse_config(doc, "ok.toml").experiment.matrices == "printed"
+    # Asking for the printed matrices flies Q_printed unchecked ...
+    ok = mutate(raw, ("experiment", "matrices"), "printed")
+    assert parse_config(ok, "ok.toml").experiment.matrices == "printed"
+    # ... but every matrix without a printed variant is still checked.
+    bad = mutate(ok, ("nlsoc", "z_psi", "H"), [[-4200.0, 3800.0, 0, 0], [3800.0, 4300.0, 0, 0], [0, 0, 17500.0, 16000.0], [0, 0, 16000.0, 17500.0]])
+    reject(bad, "nlsoc.z_psi.H", "indefinite")
+
+
+def test_paths_never_fall_back_to_bundled_configs(tmp_path):
+    with pytest.raises(ConfigError, match="no such file"):
+        load_config(tmp_path / "outdoor-altitude.toml")
+    assert load_config("outdoor-altitude.toml").experiment.name == "outdoor-altitude"
+
+
+def test_horizon_and_duration_in_whole_steps(raw):
+    reject(mutate(raw, ("experiment", "horizon_s"), 600.005), "experiment.horizon_s", "whole number of steps")
+    reject(mutate(raw, ("experiment", "horizon_s"), 1e9), "experiment.horizon_s", "at most")
+    reject(mutate(raw, ("experiment", "duration_s"), 0.001), "experiment.duration_s", "shorter than one step")
+
+
+def test_same_as_and_mirror_errors(raw):
+    reject(mutate(raw, ("loc", "x_theta", "same_as"), "z"), "loc.x_theta.same_as", "must be one of")
+    reject(mutate(raw, ("loc", "x_theta", "mirror"), True), "loc.x_theta.mirror", "only NLSOC mirrors")
+
+
+def test_non_utf8_file_is_a_config_error(tmp_path):
+    bad = tmp_path / "bin.toml"
+    bad.write_bytes(b"\xff\xfe[experiment]\n")
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        load_config(bad)
 
 
 def test_corrected_list_needs_the_printed_matrix(raw):

@@ -19,20 +19,31 @@ def record(z, vz, thrust, ts=0.1):
 
 
 def test_hand_computed_metrics(outdoor):
-    mission = Mission([PhaseConfig("takeoff", 0.1, z_m=1.0), PhaseConfig("hold", 1.9)])
+    mission = Mission([PhaseConfig("takeoff", 0.2, z_m=1.0), PhaseConfig("hold", 0.2)])
     z = np.array([0.0, 0.5, 1.2, 1.0, 1.0])
     vz = np.array([0.0, 1.0, 0.0, 0.0, 0.0])
     rec = record(z, vz, [10.0, 12.0, 8.0, 9.81])
+    rec.ref[:, 2] = [0.0, 0.5, 1.0, 1.0, 1.0]       # the ramp, then the hold
+    rec.ref[:2, 5] = 5.0                             # ramp velocity
     m = flight_metrics(rec, outdoor, mission, None)
     assert "J" not in m
     assert m["J_u"] == pytest.approx(10 + 12 + 8 + 9.81)
     assert m["J_u_hover"] == pytest.approx(0.19 + 2.19 + 1.81 + 0.0)
     assert m["J_u_all"] == pytest.approx(m["J_u"] + 4 * 0.5)
-    # e = [1 - z, 0 - vz] for the first four states
-    assert m["J_e"] == pytest.approx(1.0 + np.hypot(0.5, 1.0) + 0.2 + 0.0)
-    assert m["J_e_setpoint"] == pytest.approx(m["J_e"])
+    # against the reference: e = [z_ref - z, vz_ref - vz]
+    assert m["J_e"] == pytest.approx(5.0 + 4.0 + 0.2 + 0.0)
+    # against the final set point (1 m, 0 m/s)
+    assert m["J_e_setpoint"] == pytest.approx(1.0 + np.hypot(0.5, 1.0) + 0.2 + 0.0)
     assert m["overshoot_m"] == pytest.approx(0.2)
-    assert m["steady_state_error_m"] == pytest.approx(np.mean(1.0 - z[:4]))
+    # the hold's last second is the whole hold here: steps 2 and 3
+    assert m["steady_state_error_m"] == pytest.approx(np.mean([1.0 - 1.2, 1.0 - 1.0]))
+
+
+def test_steady_state_falls_back_to_the_end_of_a_short_flight(outdoor):
+    mission = Mission([PhaseConfig("takeoff", 0.2, z_m=1.0), PhaseConfig("hold", 100.0)])
+    rec = record(np.array([0.0, 0.5, 0.9, 1.0, 1.0]), np.zeros(5), [9.81] * 4)
+    m = flight_metrics(rec, outdoor, mission, None)
+    assert m["steady_state_error_m"] == pytest.approx(np.mean(1.0 - np.array([0.0, 0.5, 0.9, 1.0])))
 
 
 def test_quadratic_cost_of_eq5(outdoor):

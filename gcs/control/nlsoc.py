@@ -233,7 +233,6 @@ class NlsocLaw(StagedLaw):
         self.model = model
         self.limits = limits
         self._ctx = _Ctx()
-        self.last_z_psi_input: tuple[float, float] = (0.0, 0.0)
 
     def step_j(self, j: int, state: State, ref: State) -> Command:
         d = self.design
@@ -243,7 +242,6 @@ class NlsocLaw(StagedLaw):
         ctx.cos_pitch, ctx.sin_pitch = math.cos(th), math.sin(th)
         ez = (state[2] - ref[2], state[5] - ref[5], wrap_angle(state[8] - ref[8]), state[11] - ref[11])
         du, t_yaw = d.z_psi.control(j, ez, ctx)
-        self.last_z_psi_input = (du, t_yaw)
         if d.gravity_compensated:
             thrust = self.model.hover_thrust_n / tilt_cos(phi, th) + du
         else:

@@ -1,0 +1,82 @@
+"""Safety envelope between the controller and the output adapter.
+
+Applied every tick to the controller's command (thrust [N], Euler-angle
+accelerations [rad/s^2]) with the state estimate (paper frame):
+
+* thrust is clipped to ``[0, max_thrust_n]``; each angular acceleration to
+  ``+-max_angular_accel_rad_s2``;
+* tilt: when |roll| or |pitch| exceeds ``max_tilt_rad`` and the demand would
+  tilt further, the demand on that axis is replaced by a levelling PD demand;
+* geofence: |x| or |y| beyond ``fence_half_width_m`` of the takeoff point, or z
+  above ``ceiling_m``, is reported as a breach (the failsafe lands; the
+  envelope itself does not steer).
+
+:meth:`SafetyEnvelope.apply` returns the limited command and the set of
+limits that acted this tick, for the console and the log.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from gcs.model import Command, State
+
+__all__ = ["EnvelopeLimits", "SafetyEnvelope", "LIMIT_FLAGS"]
+
+LIMIT_FLAGS = ("thrust", "torque", "tilt", "geofence", "ceiling")
+
+
+@dataclass(frozen=True)
+class EnvelopeLimits:
+    """Limits of the envelope (SI units)."""
+
+    max_thrust_n: float
+    max_angular_accel_rad_s2: float
+    max_tilt_rad: float
+    fence_half_width_m: float
+    ceiling_m: float
+    level_kp: float = 170.0
+    level_kd: float = 63.0
+
+    def __post_init__(self) -> None:
+        for name in ("max_thrust_n", "max_angular_accel_rad_s2", "max_tilt_rad", "fence_half_width_m", "ceiling_m"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}")
+
+
+class SafetyEnvelope:
+    """Limits commands and watches the fence."""
+
+    def __init__(self, limits: EnvelopeLimits) -> None:
+        self.limits = limits
+
+    def breaches(self, state: State) -> frozenset[str]:
+        """Fence breaches of the estimated state (empty when inside)."""
+        lim = self.limits
+        out = set()
+        if abs(state.x) > lim.fence_half_width_m or abs(state.y) > lim.fence_half_width_m:
+            out.add("geofence")
+        if state.z > lim.ceiling_m:
+            out.add("ceiling")
+        return frozenset(out)
+
+    def apply(self, state: State, cmd: Command) -> tuple[Command, frozenset[str]]:
+        """The limited command and the flags of the limits that acted."""
+        lim = self.limits
+        flags = set()
+        thrust = cmd.thrust_n
+        if thrust < 0.0 or thrust > lim.max_thrust_n:
+            thrust = min(max(thrust, 0.0), lim.max_thrust_n)
+            flags.add("thrust")
+        acc = [cmd.roll_accel_rad_s2, cmd.pitch_accel_rad_s2, cmd.yaw_accel_rad_s2]
+        for i, (angle, rate) in enumerate(((state.roll, state.roll_rate), (state.pitch, state.pitch_rate))):
+            if abs(angle) > lim.max_tilt_rad and acc[i] * angle > 0.0:
+                acc[i] = -lim.level_kp * angle - lim.level_kd * rate
+                flags.add("tilt")
+        a = lim.max_angular_accel_rad_s2
+        for i in range(3):
+            if acc[i] > a or acc[i] < -a:
+                acc[i] = a if acc[i] > a else -a
+                flags.add("torque")
+        flags |= self.breaches(state)
+        return Command(thrust, acc[0], acc[1], acc[2]), frozenset(flags)
