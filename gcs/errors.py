@@ -32,3 +32,11 @@ class ConfigError(GcsError, ValueError):
 
 class DesignError(GcsError, ValueError):
     """A controller cannot be designed from the given matrices or model."""
+
+
+class LogError(GcsError):
+    """A flight log cannot be written or read: unwritable directory, full disk,
+    missing file, not an MCAP log, or an MCAP log without what a tool needs."""
+
+
+__all__.append("LogError")

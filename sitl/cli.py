@@ -1,8 +1,255 @@
-"""``sitl`` command line (the networked SITL arrives with its own issue)."""
+"""``sitl``: a simulated ArduCopter quadrotor that a MAVLink ground station connects to.
 
+Examples::
+
+    sitl --udp 127.0.0.1:14550                 # GCS: udpin:127.0.0.1:14550 (like ArduPilot's --out)
+    sitl --udp-listen 14560 --lockstep --seed 3 # GCS: udpout:127.0.0.1:14560, time advances per command
+    sitl --tcp 5760                            # GCS: tcp:127.0.0.1:5760
+    sitl --pty --baud 57600 --loss 0.02 --latency 0.03   # prints /dev/pts/N: a 915 MHz radio link
+
+The first line on stdout is what the ground station passes to
+``mavutil.mavlink_connection`` (for ``--pty``: the device path).  Ctrl-C or
+SIGTERM stop it cleanly (exit 0).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import logging
+import signal
 import sys
+from typing import NoReturn, Sequence
+
+from sitl.clock import MonotonicClock
+from sitl.errors import SitlError, UsageError
+from sitl.radio import RadioParams
+from sitl.server import SitlServer
+from sitl.simulation import InitialConditions
+from sitl.transport import PtyTransport, TcpTransport, UdpTransport, parse_host_port
+from sitl.vehicle_params import MODELS, VehicleParams, bundled_vehicles, load_vehicle
+from sitl.wind import WindParams
+
+__all__ = ["main", "build_parser"]
+
+_EPILOG = """\
+conventions (ArduCopter; see sitl/autopilot.py):
+  modes            STABILIZE 0, GUIDED 4, LAND 9, GUIDED_NOGPS 20 (MAV_CMD_DO_SET_MODE or SET_MODE)
+  arming           MAV_CMD_COMPONENT_ARM_DISARM; refused (STATUSTEXT "Arm: ...") when leaning more
+                   than ATC_ANGLE_MAX, not landed, battery low, or in LAND; param2=21196 forces
+  streams          none but HEARTBEAT until requested: MAV_CMD_SET_MESSAGE_INTERVAL or REQUEST_DATA_STREAM
+  SET_ATTITUDE_TARGET (GUIDED/GUIDED_NOGPS)
+                   GUID_OPTIONS=0: thrust is a climb rate (0.5 hold, 1.0 = +WP_SPD_UP, 0.0 = -WP_SPD_DN)
+                   GUID_OPTIONS=8: thrust = throttle 0..1 of 4 x rotors.max_thrust_n, divided by
+                   cos(tilt) while ATC_ANGLE_BOOST=1 (ArduPilot's default; set 0 for raw thrust)
+  SET_ACTUATOR_CONTROL_TARGET (group 0)
+                   controls[0..2] in -1..1 = torque / (sqrt(2) L T_max, sqrt(2) L T_max, 2 k T_max),
+                   controls[3] in 0..1 = thrust / (4 T_max); `sitl --describe` prints the numbers
+  failsafe         no new target for GUID_TIMEOUT s: level, LAND, STATUSTEXT; LAND disarms on landing;
+                   DISARM_DELAY s landed while armed disarms
+  lockstep         each SET_ATTITUDE_TARGET / SET_ACTUATOR_CONTROL_TARGET advances --period seconds,
+                   then every stream message due is sent; no command, no time
+  signing          with --signing-key, unsigned or badly signed frames are rejected and counted
+                   (SYS_STATUS errors_count3); outgoing frames are signed
+
+vehicles: {vehicles} (or a TOML file; see configs/vehicles/)
+"""
 
 
-def main(argv=None) -> int:
-    print("sitl: the networked MAVLink SITL is not built yet; use `gcs sim` for in-process simulation", file=sys.stderr)
-    return 2
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser whose errors are one line, without the usage text."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``sitl`` argument parser."""
+    p = _Parser(prog="sitl", description="Simulated ArduCopter quadrotor (6-DOF physics, sensors, autopilot) "
+                "behind a MAVLink endpoint.", epilog=_EPILOG.format(vehicles=", ".join(bundled_vehicles())),
+                formatter_class=argparse.RawDescriptionHelpFormatter)
+    ep = p.add_argument_group("endpoint (one; default --udp 127.0.0.1:14550)").add_mutually_exclusive_group()
+    ep.add_argument("--udp", metavar="HOST:PORT",
+                    help="send to a ground station listening there (it uses udpin:HOST:PORT)")
+    ep.add_argument("--udp-listen", metavar="[HOST:]PORT",
+                    help="listen there and answer the senders (ground station: udpout:HOST:PORT; it must send first)")
+    ep.add_argument("--tcp", metavar="[HOST:]PORT", help="TCP server (ground station: tcp:HOST:PORT); HOST 127.0.0.1")
+    ep.add_argument("--pty", action="store_true",
+                    help="serial port on a pseudo-terminal; prints its path (open it like /dev/ttyUSB0)")
+    sim = p.add_argument_group("simulation")
+    sim.add_argument("--vehicle", metavar="NAME|FILE", default=None,
+                     help="bundled vehicle name or TOML file (default: quad-1kg)")
+    sim.add_argument("--model", choices=MODELS, default=None,
+                     help="plant: 6-DOF rigid body or the paper's reduced model (default: the vehicle file's)")
+    sim.add_argument("--lockstep", action="store_true",
+                     help="advance simulated time one period per received target instead of in real time")
+    sim.add_argument("--period", metavar="S", type=float, default=0.01,
+                     help="lockstep step, a multiple of 0.0025 s (default: 0.01)")
+    sim.add_argument("--seed", metavar="S", type=int, default=0, help="seed of wind, sensor noise and loss (default: 0)")
+    sim.add_argument("--wind", metavar="SPEED[,DIR[,GUST[,TAU]]]", default=None,
+                     help="steady wind [m/s] towards DIR [deg from north, default: random from the seed], "
+                          "gust standard deviation [m/s], gust correlation time [s] (default 2)")
+    sim.add_argument("--start-altitude", metavar="M", type=float, default=0.0,
+                     help="start at rest this high above home (default: on the ground)")
+    sim.add_argument("--start-attitude", metavar="ROLL,PITCH,YAW", default=None,
+                     help="initial Euler angles [deg]; tilted on the ground = resting on a slope")
+    sim.add_argument("--param", metavar="NAME=VALUE", action="append", default=[],
+                     help="ArduPilot parameter override, repeatable (e.g. GUID_OPTIONS=8)")
+    sim.add_argument("--sysid", metavar="N", type=int, default=None, help="MAVLink system id (SYSID_THISMAV)")
+    sim.add_argument("--prearm-delay", metavar="S", type=float, default=0.0,
+                     help="refuse arming for S simulated seconds after boot (a real autopilot's EKF takes ~20 s)")
+    link = p.add_argument_group("link emulation (both directions)")
+    link.add_argument("--baud", metavar="N", type=int, default=None,
+                      help="byte rate limit as a serial line, 10 bits/byte (default: 57600 with --pty, else none; "
+                           "0 = none)")
+    link.add_argument("--loss", metavar="P", type=float, default=0.0, help="probability of losing a frame (0..1)")
+    link.add_argument("--latency", metavar="S", type=float, default=0.0, help="one-way latency [s]")
+    link.add_argument("--signing-key", metavar="KEY", default=None,
+                      help="MAVLink 2 signing: 64 hex digits, or a passphrase (key = SHA-256 of it, as MAVProxy)")
+    other = p.add_argument_group("other")
+    other.add_argument("--describe", action="store_true",
+                       help="print the vehicle's derived values (hover thrust, torque normalisation) and exit")
+    other.add_argument("-v", "--verbose", action="count", default=0, help="log to stderr (-vv: debug)")
+    return p
+
+
+def _floats(text: str, option: str, count: tuple[int, int]) -> list[float]:
+    try:
+        vals = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise UsageError(f"{option}: expected comma-separated numbers, got {text!r}") from None
+    if not count[0] <= len(vals) <= count[1]:
+        raise UsageError(f"{option}: expected {count[0]} to {count[1]} numbers, got {text!r}")
+    return vals
+
+
+def _wind(text: str | None) -> WindParams | None:
+    if text is None:
+        return None
+    v = _floats(text, "--wind", (1, 4))
+    try:
+        return WindParams(mean_speed_m_s=v[0], direction_deg=v[1] if len(v) > 1 else None,
+                          gust_std_m_s=v[2] if len(v) > 2 else 0.0, gust_tau_s=v[3] if len(v) > 3 else 2.0)
+    except ValueError as exc:
+        raise UsageError(f"--wind: {exc}") from None
+
+
+def _params(items: Sequence[str], sysid: int | None) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name:
+            raise UsageError(f"--param: expected NAME=VALUE, got {item!r}")
+        try:
+            out[name.strip().upper()] = float(value)
+        except ValueError:
+            raise UsageError(f"--param {name}: not a number: {value!r}") from None
+    if sysid is not None:
+        out["SYSID_THISMAV"] = float(sysid)
+    return out
+
+
+def _signing_key(text: str | None) -> bytes | None:
+    if text is None:
+        return None
+    t = text.strip()
+    if len(t) == 64:
+        try:
+            return bytes.fromhex(t)
+        except ValueError:
+            pass
+    if not t:
+        raise UsageError("--signing-key: empty")
+    return hashlib.sha256(t.encode("utf-8")).digest()
+
+
+def _describe(v: VehicleParams) -> str:
+    tq = v.max_torque_nm
+    ix = v.inertia_diagonal
+    return "\n".join([
+        f"vehicle          {v.name} ({v.source}), plant {v.model}",
+        f"mass             {v.mass_kg:g} kg, inertia diag {ix[0]:g} {ix[1]:g} {ix[2]:g} kg m^2",
+        f"full thrust      {v.max_total_thrust_n:g} N (4 x {v.rotors.max_thrust_n:g} N) = thrust 1.0",
+        f"hover thrust     {v.hover_thrust_fraction:.4f} (MOT_THST_HOVER)",
+        f"max torque       roll {tq[0]:.4f}  pitch {tq[1]:.4f}  yaw {tq[2]:.4f} N m = controls 1.0",
+        f"max ang. accel   roll {tq[0] / ix[0]:.1f}  pitch {tq[1] / ix[1]:.1f}  yaw {tq[2] / ix[2]:.2f} rad/s^2",
+    ])
+
+
+def _run(args: argparse.Namespace) -> int:
+    vehicle = load_vehicle(args.vehicle)
+    if args.model is not None:
+        vehicle = vehicle.with_model(args.model)
+    if args.describe:
+        print(_describe(vehicle), flush=True)
+        return 0
+    if not 0.0 <= args.loss <= 1.0:
+        raise UsageError(f"--loss: must be in [0, 1], got {args.loss}")
+    if not args.prearm_delay >= 0.0:
+        raise UsageError(f"--prearm-delay: must be >= 0, got {args.prearm_delay}")
+    if not args.latency >= 0.0:
+        raise UsageError(f"--latency: must be >= 0, got {args.latency}")
+    baud = args.baud if args.baud is not None else (57600 if args.pty else 0)
+    if baud < 0:
+        raise UsageError(f"--baud: must be >= 0, got {baud}")
+    initial = InitialConditions(args.start_altitude)
+    if args.start_attitude is not None:
+        r, pch, y = _floats(args.start_attitude, "--start-attitude", (3, 3))
+        initial = InitialConditions(args.start_altitude, r, pch, y)
+    wind = _wind(args.wind)
+    params = _params(args.param, args.sysid)
+    key = _signing_key(args.signing_key)
+    radio = RadioParams(baud=baud, loss=args.loss, latency_s=args.latency)
+    clock = MonotonicClock()
+    try:
+        if args.pty:
+            transport = PtyTransport(clock.monotonic_ns)
+        elif args.tcp is not None:
+            transport = TcpTransport(parse_host_port(args.tcp))
+        elif args.udp_listen is not None:
+            transport = UdpTransport(parse_host_port(args.udp_listen))
+        else:
+            remote = parse_host_port(args.udp or "127.0.0.1:14550")
+            local = "127.0.0.1" if remote[0].startswith("127.") or remote[0] == "localhost" else "0.0.0.0"
+            transport = UdpTransport((local, 0), remote)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    server = SitlServer(transport, vehicle=vehicle, lockstep=args.lockstep, control_period_s=args.period,
+                        seed=args.seed, wind=wind, initial=initial, params=params, signing_key=key, radio=radio,
+                        clock=clock, prearm_delay_s=args.prearm_delay)
+
+    def on_signal(signum, frame) -> None:  # noqa: ARG001
+        server.request_stop()
+
+    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        print(server.connection_string, flush=True)
+        print(f"sitl: {vehicle.name} ({vehicle.model}), {'lockstep ' + str(args.period) + ' s' if args.lockstep else 'real time'}, "
+              f"seed {args.seed}; ground station: {server.connection_string}", file=sys.stderr, flush=True)
+        server.run()
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+        server.close()
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``sitl`` command; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING - 10 * min(args.verbose, 2), stream=sys.stderr,
+                        format="sitl: %(levelname)s: %(message)s")
+    try:
+        return _run(args)
+    except SitlError as exc:
+        print(f"sitl: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        return 0
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
