@@ -102,6 +102,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     sub.add_parser("configs", help="list the bundled experiment configs")
 
+    from gcs.flight.command import add_fly_parser
+    add_fly_parser(sub, _positive_int, _positive_float)
+
     b = sub.add_parser("link-budget", help="bytes per second each way of the 100 Hz exchange over a serial link",
                        description="Compute the MAVLink 2 link budget of the control exchange at a baud rate: "
                                    "telemetry down, setpoints up, housekeeping both ways.")
@@ -192,6 +195,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == "sim":
             return _cmd_sim(args)
+        if args.command == "fly":
+            from gcs.flight.command import cmd_fly
+            return cmd_fly(args, format_table)
         if args.command == "link-budget":
             return _cmd_link_budget(args)
         if args.command == "configs":

@@ -101,6 +101,7 @@ class VehicleClock:
         self.pump = pump
         self.max_wait_s = max_wait_s
         self._virtual_ns = 0
+        self.timeouts = 0
 
     def now_ns(self) -> int:
         return max(self.telemetry.status.time_boot_ms * 1_000_000, self._virtual_ns)
@@ -111,6 +112,7 @@ class VehicleClock:
             remaining = end - time.monotonic()
             if remaining <= 0:
                 self._virtual_ns = deadline_ns
+                self.timeouts += 1
                 return
             self.pump(min(remaining, 0.005))
 
@@ -181,6 +183,7 @@ class Flight:
         self.controller = make_controller(controller, config)
         self.adapter: OutputAdapter | None = None
         self._last_cmd: Command | None = None
+        self._last_rx_wall = time.monotonic()
         self._limit_flags_seen: set[str] = set()
 
     # ------------------------------------------------------------------ events and I/O
@@ -198,23 +201,49 @@ class Flight:
         msgs = self.link.drain()
         for m in msgs:
             self.telemetry.handle(m, now if not self.lockstep else self.clock.now_ns())
+        if msgs:
+            self._last_rx_wall = time.monotonic()
         return len(msgs)
 
     def _pump_wait(self, wait_s: float) -> None:
         if self._pump() == 0:
             self.link.conn.select(wait_s)
 
-    def _wait_for(self, what: str, predicate: Callable[[], bool], timeout_s: float, *, send_idle: bool = True) -> bool:
-        """Pump (and stream idle setpoints, which also drive a lockstep vehicle) until ``predicate``."""
+    def _wait_for(self, what: str, predicate: Callable[[], bool], timeout_s: float, *, thrust_n: float = 0.0) -> bool:
+        """Pump (and stream level setpoints at ``thrust_n``, which also drive a lockstep vehicle)
+        until ``predicate``."""
         end = time.monotonic() + timeout_s
         while time.monotonic() < end:
             self._pump()
             if predicate():
                 return True
-            if send_idle and self.adapter is not None:
-                self._send_level(0.0)
-            self.link.conn.select(0.01)
+            self._idle_tick(thrust_n)
         return predicate()
+
+    def _idle_tick(self, thrust_n: float) -> None:
+        """One level setpoint and one control period of waiting.
+
+        In real time: 10 ms of wall time.  In lockstep the setpoint moves the vehicle one
+        period; the next one goes only when its telemetry is back (or after 50 ms), so a
+        slow serial link is never flooded with steps it cannot report.
+        """
+        if self.adapter is None:
+            self.link.conn.select(0.01)
+            return
+        before = self.telemetry.status.time_boot_ms
+        self._send_level(thrust_n)
+        wait = 0.01
+        if self.lockstep:
+            # Wait for the step's telemetry, unless the telemetry is gone (failsafe): then keep
+            # the vehicle's time moving so that it can land by itself.
+            wait = 0.05 if time.monotonic() - self._last_rx_wall < 0.5 else 0.005
+        end = time.monotonic() + wait
+        while True:
+            remaining = end - time.monotonic()
+            if remaining <= 0 or (self.lockstep and self.telemetry.status.time_boot_ms > before):
+                return
+            if self._pump() == 0:
+                self.link.conn.select(min(remaining, 0.005))
 
     def _send_level(self, thrust_n: float) -> None:
         state = self.estimator.state()
@@ -263,6 +292,8 @@ class Flight:
         if not self._wait_for("telemetry", lambda: self.telemetry.fresh(self.clock.now_ns(), fc.telemetry_stale_s)
                               and self.estimator.initialised, 5.0):
             raise PreflightRefused("no fresh ATTITUDE and LOCAL_POSITION_NED telemetry within 5 s")
+        if fc.min_battery_v > 0:
+            self._wait_for("battery", lambda: self.telemetry.status.battery_voltage_v is not None, 2.0)
         volt = self.telemetry.status.battery_voltage_v
         if fc.min_battery_v > 0:
             if volt is None:
@@ -274,11 +305,9 @@ class Flight:
             raise PreflightRefused(f"mode GUIDED_NOGPS refused (MAV_RESULT {res})")
         self._wait_for("mode", lambda: self.telemetry.status.custom_mode == 20, 3.0)
         # Stream setpoints before arming (0.5 s of idle, level).
-        end = time.monotonic() + 0.5
-        while time.monotonic() < end:
+        for _ in range(int(round(0.5 / self.config.experiment.ts_s))):
             self._pump()
-            self._send_level(0.0)
-            time.sleep(0.01) if not self.lockstep else self.link.conn.select(0.005)
+            self._idle_tick(0.0)
         res = link.arm(True, on_message=self._handle_now)
         if res != mavlink.MAV_RESULT_ACCEPTED:
             why = self.telemetry.status.statustext[-1] if self.telemetry.status.statustext else f"MAV_RESULT {res}"
@@ -395,23 +424,38 @@ class Flight:
                                   np.array(js, dtype=np.int64))
             metrics = flight_metrics(record, self.config, mission, controller_cost(self.controller_name, self.config))
         c = self.link.counters
+        loop = self.stats.summary()
+        if isinstance(self.clock, VehicleClock):
+            loop["telemetry_timeouts"] = self.clock.timeouts
         return FlightResult(self.controller_name, self.config.source, reason, len(cmds) * e.ts_s, metrics,
-                            self.stats.summary(), self.events,
+                            loop, self.events,
                             {"received": c.received, "sent": c.sent, "bad_data": c.bad_data,
                              "other_system": c.other_system, "unsigned_rejected": c.unsigned_rejected,
                              "timesync_rtt_ms": self.telemetry.timesync_rtt_ms},
                             record)
 
     def _land(self, reason: str) -> None:
-        """LAND mode, level setpoints while waiting, until disarmed (or the timeout)."""
+        """LAND mode, level setpoints while waiting, until disarmed (or the timeout).
+
+        With the telemetry gone the acknowledgement cannot come back: LAND is sent once
+        without waiting long, and level setpoints keep the vehicle upright (they also keep
+        a lockstep simulator's time moving) while it lands on its own.
+        """
+        quick = reason == "telemetry_lost"
         try:
-            res = self.link.set_mode("LAND", on_message=self._handle_now)
+            res = self.link.command_long(mavlink.MAV_CMD_DO_SET_MODE,
+                                         [mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 9],
+                                         timeout_s=0.3 if quick else 3.0, retries=0 if quick else 2,
+                                         on_message=self._handle_now)
             if res != mavlink.MAV_RESULT_ACCEPTED:
                 self.event("warning", f"LAND refused (MAV_RESULT {res})")
         except LinkError as exc:
             self.event("warning", f"LAND not acknowledged: {exc}")
         self.event("phase", "landing (LAND mode)")
-        landed = self._wait_for("disarm", lambda: not self.telemetry.status.armed, self.flight_cfg.land_timeout_s)
+        # Should LAND not have been taken, 90 % of hover thrust, level, still brings it down gently.
+        landed = self._wait_for("disarm", lambda: not self.telemetry.status.armed or self.interrupts.count >= 3,
+                                self.flight_cfg.land_timeout_s, thrust_n=0.9 * self.model.hover_thrust_n)
+        landed = landed and not self.telemetry.status.armed
         if landed:
             self.event("landed", "landed and disarmed")
         else:

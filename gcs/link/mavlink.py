@@ -16,7 +16,8 @@ The link knows nothing of the paper's frame; :mod:`gcs.flight.telemetry` convert
 
 from __future__ import annotations
 
-import os
+import errno
+import socket
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Iterable
@@ -101,6 +102,30 @@ class MavlinkLink:
             self.conn.setup_signing(signing_key, sign_outgoing=True, allow_unsigned_callback=self._allow_unsigned)
         self.mav = self.conn.mav
         self.last_heartbeat = None
+        self._last_addr = None
+        self.vehicle_addr = None
+        if isinstance(self.conn, mavutil.mavudp) and self.conn.udp_server:
+            self.conn.recv = self._udp_recv
+
+    def _udp_recv(self, n=None) -> bytes:
+        """pymavlink's udpin receive, but replies go to the vehicle only once it is known.
+
+        pymavlink sends to every address that ever sent a datagram; any stray sender on the
+        port would then get our commands.  Once the target's first frame arrives its address
+        is the only destination.
+        """
+        conn = self.conn
+        try:
+            data, addr = conn.port.recvfrom(65535)
+        except socket.error as exc:
+            if exc.errno in (errno.EAGAIN, errno.EWOULDBLOCK, errno.ECONNREFUSED):
+                return b""
+            raise
+        self._last_addr = addr
+        if self.vehicle_addr is None or addr == self.vehicle_addr:
+            conn.clients.add(addr)
+            conn.clients_last_alive[addr] = time.time()
+        return data
 
     # ------------------------------------------------------------------ receive
     def _allow_unsigned(self, mav, msg_id: int) -> bool:
@@ -118,6 +143,9 @@ class MavlinkLink:
         if msg.get_srcSystem() != self.target_system:
             c.other_system += 1
             return False
+        if self.vehicle_addr is None and self._last_addr is not None:
+            self.vehicle_addr = self._last_addr
+            self.conn.clients.intersection_update({self.vehicle_addr})
         c.received += 1
         c.by_type[t] = c.by_type.get(t, 0) + 1
         if t == "HEARTBEAT" and msg.get_srcComponent() == self.target_component:

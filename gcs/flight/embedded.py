@@ -1,0 +1,71 @@
+"""The built-in SITL as a child process, for ``gcs fly`` without ``--port``/``--connect``.
+
+The ground station binds a UDP port first (``udpin:127.0.0.1:0``), then starts
+``python -m sitl.cli --udp 127.0.0.1:<that port>`` so the vehicle sends there:
+no port race.  The SITL is a separate process, as a real autopilot would be,
+so its physics never competes with the 100 Hz loop for the interpreter.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from typing import Sequence
+
+from gcs.errors import GcsError
+
+__all__ = ["EmbeddedSitl"]
+
+
+class EmbeddedSitl:
+    """A ``sitl`` child process sending to ``127.0.0.1:<gcs_port>``.
+
+    Parameters
+    ----------
+    gcs_port : int
+        The UDP port the ground station listens on.
+    lockstep : bool
+    seed : int
+    extra_args : sequence of str
+        More ``sitl`` options (``--wind``, ``--model reduced``, ...).
+    """
+
+    def __init__(self, gcs_port: int, *, lockstep: bool, seed: int = 0, extra_args: Sequence[str] = ()) -> None:
+        self.args = [sys.executable, "-m", "sitl.cli", "--udp", f"127.0.0.1:{gcs_port}", "--seed", str(seed),
+                     *(["--lockstep"] if lockstep else []), *extra_args]
+        self.proc: subprocess.Popen | None = None
+
+    def start(self) -> "EmbeddedSitl":
+        try:
+            # Its own process group: a Ctrl-C at the terminal reaches the ground station only,
+            # which lands the vehicle before stopping the simulator.
+            self.proc = subprocess.Popen(self.args, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                         stderr=subprocess.PIPE, start_new_session=True)
+        except OSError as exc:
+            raise GcsError(f"cannot start the built-in SITL: {exc}") from None
+        return self
+
+    def check_alive(self) -> None:
+        """Raise if the child died (with its last error line)."""
+        if self.proc is not None and self.proc.poll() is not None:
+            err = (self.proc.stderr.read() or b"").decode(errors="replace").strip().splitlines() if self.proc.stderr else []
+            raise GcsError(f"the built-in SITL exited with code {self.proc.returncode}"
+                           + (f": {err[-1]}" if err else ""))
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        if self.proc is None or self.proc.poll() is not None:
+            return
+        try:
+            os.killpg(self.proc.pid, signal.SIGINT)
+            self.proc.wait(timeout_s)
+        except (ProcessLookupError, subprocess.TimeoutExpired):
+            self.proc.kill()
+            self.proc.wait(timeout_s)
+
+    def __enter__(self) -> "EmbeddedSitl":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
