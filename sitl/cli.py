@@ -85,7 +85,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="advance simulated time one period per received target instead of in real time")
     sim.add_argument("--period", metavar="S", type=float, default=0.01,
                      help="lockstep step, a multiple of 0.0025 s (default: 0.01)")
-    sim.add_argument("--seed", metavar="S", type=int, default=0, help="seed of wind, sensor noise and loss (default: 0)")
+    sim.add_argument("--seed", metavar="S", type=int, default=0,
+                     help="seed of wind, sensor noise and loss (default: 0)")
     sim.add_argument("--wind", metavar="SPEED[,DIR[,GUST[,TAU]]]", default=None,
                      help="steady wind [m/s] towards DIR [deg from north, default: random from the seed], "
                           "gust standard deviation [m/s], gust correlation time [s] (default 2)")
@@ -224,8 +225,9 @@ def _run(args: argparse.Namespace) -> int:
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         print(server.connection_string, flush=True)
-        print(f"sitl: {vehicle.name} ({vehicle.model}), {'lockstep ' + str(args.period) + ' s' if args.lockstep else 'real time'}, "
-              f"seed {args.seed}; ground station: {server.connection_string}", file=sys.stderr, flush=True)
+        timing = f"lockstep {args.period:g} s" if args.lockstep else "real time"
+        print(f"sitl: {vehicle.name} ({vehicle.model}), {timing}, seed {args.seed}; "
+              f"ground station: {server.connection_string}", file=sys.stderr, flush=True)
         server.run()
     finally:
         for s, h in old.items():

@@ -1,3 +1,4 @@
+from pathlib import Path
 import copy
 import subprocess
 import sys
@@ -10,7 +11,7 @@ from hypothesis import given, settings, strategies as st
 from gcs.config import bundled_configs, load_config, parse_config
 from gcs.errors import ConfigError
 
-from conftest import CONFIGS
+CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 
 
 @pytest.fixture(scope="module")

@@ -35,6 +35,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Callable
 
+import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.config import Config, PhaseConfig
@@ -266,6 +267,9 @@ class Flight:
         hb = link.wait_heartbeat(on_message=self._handle_now)
         self.event("link", f"connected to system {link.target_system} on {link.url} "
                            f"(autopilot {hb.autopilot}, type {hb.type})")
+        link.send_timesync()
+        if link.wait(lambda m: m.get_type() == "TIMESYNC" and m.tc1 != 0, 1.0, self._handle_now) is not None:
+            self.event("link", f"round trip {self.telemetry.timesync_rtt_ms:.1f} ms (TIMESYNC)")
         if not budget_ok:
             raise PreflightRefused("link budget exceeded (see above); use --force-budget to fly anyway")
         rates = {mavlink.MAVLINK_MSG_ID_ATTITUDE: fc.telemetry_rate_hz,
@@ -281,6 +285,15 @@ class Flight:
             if not int(new) & 8:
                 raise PreflightRefused("the vehicle did not accept GUID_OPTIONS bit 3 (thrust as thrust)")
             self.event("param", f"GUID_OPTIONS {int(guid)} -> {int(new)} (thrust field is thrust)")
+        # Our controllers divide the thrust by cos(roll) cos(pitch) themselves: ArduPilot's angle
+        # boost would do it a second time.
+        boost = self._param("ATC_ANGLE_BOOST", 0.0)
+        if boost:
+            new = link.param_set("ATC_ANGLE_BOOST", 0.0, on_message=self._handle_now)
+            if new:
+                raise PreflightRefused("the vehicle did not accept ATC_ANGLE_BOOST = 0 (thrust tilt compensation "
+                                       "is done by the controller)")
+            self.event("param", "ATC_ANGLE_BOOST 1 -> 0 (the controller compensates tilt)")
         hover = self._param("MOT_THST_HOVER", 0.4)
         gains = tuple(self._param(f"ATC_ANG_{ax}_P", 4.5) for ax in ("RLL", "PIT", "YAW"))
         self.adapter = OutputAdapter(OutputModel(
@@ -339,6 +352,7 @@ class Flight:
         k = 0
         handled_interrupts = 0
         self.event("phase", f"mission start: {len(self.config.mission)} phases, {mission.duration_s:g} s")
+        wall0 = time.perf_counter()
         while True:
             deadline = t0 + k * ts_ns
             self.clock.sleep_until_ns(deadline)
@@ -405,6 +419,9 @@ class Flight:
             refs.append(ref)
             cmds.append(cmd)
             js.append((horizon.last_steps_to_go or 0) if horizon is not None else 0)
+            if k % 100 == 0:  # once a second: the ground station is alive, and how late is the link
+                self.link.send_heartbeat()
+                self.link.send_timesync()
             if t >= next_live:
                 next_live = t + self.live_period_s
                 self.console(f"t {t:7.2f} s  z {state.z:6.3f} m  ref {ref.z:6.3f} m  err {ref.z - state.z:+.3f} m  "
@@ -412,12 +429,12 @@ class Flight:
             k += 1
             if not self.lockstep and late >= ts_ns:
                 k += int(late // ts_ns)
+        wall_s = time.perf_counter() - wall0
         end_state = self.estimator.state()
         self._land(reason)
         record = None
         metrics: dict = {}
         if cmds:
-            import numpy as np
             states.append(end_state)
             refs.append(refs[-1])
             record = FlightRecord(e.ts_s, np.array(states, float), np.array(refs, float), np.array(cmds, float),
@@ -425,13 +442,17 @@ class Flight:
             metrics = flight_metrics(record, self.config, mission, controller_cost(self.controller_name, self.config))
         c = self.link.counters
         loop = self.stats.summary()
+        loop["wall_s"] = wall_s
+        loop["realtime_ratio"] = len(cmds) * e.ts_s / wall_s if wall_s > 0 else 0.0
         if isinstance(self.clock, VehicleClock):
             loop["telemetry_timeouts"] = self.clock.timeouts
         return FlightResult(self.controller_name, self.config.source, reason, len(cmds) * e.ts_s, metrics,
                             loop, self.events,
                             {"received": c.received, "sent": c.sent, "bad_data": c.bad_data,
                              "other_system": c.other_system, "unsigned_rejected": c.unsigned_rejected,
-                             "timesync_rtt_ms": self.telemetry.timesync_rtt_ms},
+                             "timesync_rtt_ms": self.telemetry.timesync_rtt_ms,
+                             "timesync_rtt_median_ms": (float(np.median(self.telemetry.timesync_samples_ms))
+                                                        if self.telemetry.timesync_samples_ms else None)},
                             record)
 
     def _land(self, reason: str) -> None:

@@ -8,6 +8,7 @@ own time (``time_boot_ms``) is tracked for lockstep.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -59,6 +60,7 @@ class Telemetry:
         self.on_event = on_event
         self.last_ns: dict[str, int] = {}
         self.timesync_rtt_ms: float | None = None
+        self.timesync_samples_ms: list[float] = []
 
     def _event(self, kind: str, text: str) -> None:
         if self.on_event is not None:
@@ -97,8 +99,12 @@ class Telemetry:
             st.statustext.append(text)
             self._event("statustext", text)
         elif t == "TIMESYNC" and msg.tc1 != 0:
-            # Our request carried ts1 = our monotonic ns; the reply echoes it.
-            self.timesync_rtt_ms = (now_ns - msg.ts1) / 1e6
+            # Our request carried ts1 = our wall-clock monotonic ns (not the loop clock, which
+            # is the vehicle's own in lockstep); the reply echoes it.
+            rtt_ms = (time.monotonic_ns() - msg.ts1) / 1e6
+            if 0.0 <= rtt_ms < 60_000.0:
+                self.timesync_rtt_ms = rtt_ms
+                self.timesync_samples_ms.append(rtt_ms)
 
     def age_s(self, message: str, now_ns: int) -> float:
         """Seconds since ``message`` last arrived (inf if never)."""

@@ -210,6 +210,10 @@ class MavlinkLink:
     def send_heartbeat(self) -> None:
         self.send(self.mav.heartbeat_encode(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0))
 
+    def send_timesync(self) -> None:
+        """TIMESYNC request stamped with our monotonic clock [ns]; the reply gives the round trip."""
+        self.send(self.mav.timesync_encode(0, time.monotonic_ns()))
+
     def command_long(self, command: int, params: Iterable[float], timeout_s: float = 3.0, retries: int = 2,
                      on_message=None) -> int:
         """Send COMMAND_LONG and return the MAV_RESULT of its COMMAND_ACK (retries on silence)."""
