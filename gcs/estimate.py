@@ -114,10 +114,15 @@ class StateEstimator:
         Measurement noise of x, y, z [m] used by :meth:`update` (include quantisation).
     accel_noise_std_m_s2 : float
         Process noise: unmodelled acceleration.
+    ground_z_m : float or None
+        Altitude of the ground (the estimate never goes below it); None = no ground
+        constraint (a real vehicle's local origin need not be on the ground).
     """
 
-    def __init__(self, ts: float, model: ModelParams, position_std_m: Sequence[float], accel_noise_std_m_s2: float) -> None:
+    def __init__(self, ts: float, model: ModelParams, position_std_m: Sequence[float], accel_noise_std_m_s2: float,
+                 *, ground_z_m: float | None = 0.0) -> None:
         self.ts = ts
+        self.ground_z_m = ground_z_m
         self.model = model
         self.position_var = [max(float(s), 1e-4) ** 2 for s in position_std_m]
         self.accel_noise_std_m_s2 = accel_noise_std_m_s2
@@ -161,9 +166,12 @@ class StateEstimator:
         self.attitude = (roll, pitch, yaw, roll_rate, pitch_rate, yaw_rate)
 
     def _clamp_ground(self) -> None:
+        g = self.ground_z_m
+        if g is None:
+            return
         fz = self.axes[2]  # type: ignore[index]
-        if fz.p < 0.0:
-            fz.p = 0.0
+        if fz.p < g:
+            fz.p = g
             if fz.v < 0.0:
                 fz.v = 0.0
 

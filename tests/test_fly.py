@@ -262,3 +262,33 @@ def test_telemetry_from_another_system_is_ignored():
     assert result.exit_reason == "completed"
     assert result.link["other_system"] > 100
     assert abs(result.metrics["steady_state_error_m"]) < 0.05
+
+
+def test_a_mode_change_by_someone_else_stops_the_setpoints():
+    """A pilot (here a second ground station) switches the vehicle to LAND mid-flight."""
+    config = load_config("outdoor-altitude")
+    with SitlServer(UdpTransport(("127.0.0.1", 0)), lockstep=True, seed=7) as server:
+        link = MavlinkLink(server.connection_string)
+        port = int(server.connection_string.rsplit(":", 1)[1])
+
+        def pilot():
+            _wait_sim(server, 6.0)
+            mav = mavlink.MAVLink(None, srcSystem=200, srcComponent=1)
+            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            s.sendto(mav.command_long_encode(1, 1, mavlink.MAV_CMD_DO_SET_MODE, 0,
+                                             mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 9, 0, 0, 0, 0, 0).pack(mav),
+                     ("127.0.0.1", port))
+            s.close()
+
+        threading.Thread(target=pilot, daemon=True).start()
+        try:
+            flight = Flight(config, "nlsoc", link, None, console=lambda s: None)
+            flight.preflight()
+            result = flight.fly()
+        finally:
+            link.close()
+        snap_after = server.snapshot()
+    assert result.exit_reason == "vehicle_took_over" and result.exit_code == 9
+    assert any("left guided control" in e["text"] and "LAND" in e["text"] for e in result.events)
+    assert 3.0 < result.duration_s < 6.0  # the mission starts after about 1.5 s of preflight
+    assert snap_after["on_ground"] and not snap_after["armed"]

@@ -29,7 +29,7 @@ def add_fly_parser(sub, positive_int, positive_float) -> None:
         description="Preflight, GUIDED_NOGPS, arm, the config's mission at 100 Hz, LAND, disarm. With neither "
                     "--port nor --connect it flies the built-in SITL on loopback. Exit codes: 0 completed, "
                     "2 bad config/option, 3 telemetry lost, 4 geofence, 5 interrupted (landed), 6 link error, "
-                    "7 preflight refused, 8 immediate LAND (second Ctrl-C).")
+                    "7 preflight refused, 8 immediate LAND (second Ctrl-C), 9 the vehicle left guided control.")
     f.add_argument("--controller", default="nlsoc", choices=CONTROLLERS, help="controller (default nlsoc)")
     f.add_argument("--config", default=DEFAULT_FLY_CONFIG,
                    help=f"experiment config, path or bundled name (default {DEFAULT_FLY_CONFIG})")

@@ -23,6 +23,8 @@ code  exit_reason        what happened
 6     link_error         no heartbeat, port cannot be opened, link failed before flight
 7     preflight_refused  link budget, stale telemetry, battery, mode or arming refused
 8     immediate_land     a second Ctrl-C: LAND at once
+9     vehicle_took_over  the vehicle disarmed or left GUIDED(_NOGPS) (pilot, onboard
+                         failsafe): setpoints stop, the vehicle is left to its mode
 ====  =================  ==========================================================
 """
 
@@ -55,7 +57,7 @@ from gcs.model import Command, State
 __all__ = ["Flight", "FlightResult", "VehicleClock", "EXIT_CODES", "PreflightRefused"]
 
 EXIT_CODES = {"completed": 0, "telemetry_lost": 3, "geofence": 4, "interrupted": 5, "link_error": 6,
-              "preflight_refused": 7, "immediate_land": 8}
+              "preflight_refused": 7, "immediate_land": 8, "vehicle_took_over": 9}
 
 
 class PreflightRefused(GcsError):
@@ -171,7 +173,8 @@ class Flight:
         self.ts_ns = int(round(e.ts_s * 1e9))
         self.model = model_params(config)
         fc = config.flight
-        self.estimator = StateEstimator(e.ts_s, self.model, (fc.position_std_m,) * 3, config.estimator.accel_noise_std_m_s2)
+        self.estimator = StateEstimator(e.ts_s, self.model, (fc.position_std_m,) * 3, config.estimator.accel_noise_std_m_s2,
+                                        ground_z_m=None)
         self.telemetry = Telemetry(self.estimator, (fc.position_std_m ** 2,) * 3, (fc.velocity_std_m_s ** 2,) * 3,
                                    on_event=self._vehicle_event)
         self.lockstep = clock is None
@@ -210,15 +213,30 @@ class Flight:
         if self._pump() == 0:
             self.link.conn.select(wait_s)
 
-    def _wait_for(self, what: str, predicate: Callable[[], bool], timeout_s: float, *, thrust_n: float = 0.0) -> bool:
+    def _wait_for(self, what: str, predicate: Callable[[], bool], timeout_s: float, *, thrust_n: float = 0.0,
+                  send: bool = True) -> bool:
         """Pump (and stream level setpoints at ``thrust_n``, which also drive a lockstep vehicle)
-        until ``predicate``."""
+        until ``predicate``; ``send=False`` only listens (heartbeats go on)."""
         end = time.monotonic() + timeout_s
+        next_hb = time.monotonic()
         while time.monotonic() < end:
             self._pump()
             if predicate():
                 return True
-            self._idle_tick(thrust_n)
+            if send:
+                self._idle_tick(thrust_n)
+            else:
+                if time.monotonic() >= next_hb:
+                    self.link.send_heartbeat()
+                    next_hb += 1.0
+                if self.lockstep and self.adapter is not None:
+                    # A lockstep simulator's time moves only with targets: a THROTTLE_IGNORE target
+                    # is refused by the autopilot but moves the clock (lockstep only).
+                    q = (1.0, 0.0, 0.0, 0.0)
+                    self.link.send(self.link.mav.set_attitude_target_encode(
+                        self.telemetry.status.time_boot_ms, self.link.target_system, self.link.target_component,
+                        64 | 7, q, 0.0, 0.0, 0.0, 0.0))
+                self.link.conn.select(0.005 if self.lockstep else 0.01)
         return predicate()
 
     def _idle_tick(self, thrust_n: float) -> None:
@@ -347,6 +365,12 @@ class Flight:
         reason = "completed"
         ts_ns = self.ts_ns
         t0 = self.clock.now_ns()
+        # The mission is flown relative to where the vehicle stands at its start (the local
+        # origin of a real autopilot need not be the takeoff point).
+        start = self.estimator.state()
+        origin = (start.x, start.y, start.z)
+        self.envelope.origin = origin
+        self.event("phase", f"takeoff point (x {origin[0]:.2f}, y {origin[1]:.2f}, z {origin[2]:.2f}) m")
         next_live = 0.0
         phase_idx = -1
         k = 0
@@ -379,6 +403,12 @@ class Flight:
                 self.event("failsafe", f"{', '.join(sorted(breach))} breached at t = {t:.2f} s "
                                        f"(x {state.x:.2f}, y {state.y:.2f}, z {state.z:.2f} m): LAND")
                 break
+            st = self.telemetry.status
+            if not st.armed or st.custom_mode not in (20, 4):
+                reason = "vehicle_took_over"
+                self.event("failsafe", f"the vehicle left guided control at t = {t:.2f} s "
+                                       f"({'disarmed' if not st.armed else 'mode ' + st.mode}): stopping setpoints")
+                break
             if self.interrupts.count > handled_interrupts:
                 handled_interrupts = self.interrupts.count
                 if handled_interrupts >= 2:
@@ -394,7 +424,7 @@ class Flight:
                 tm = (k - override_k0) * e.ts_s
                 if tm >= override.duration_s:
                     break
-                ref = override.reference(tm)
+                ref = override.reference(tm)  # built from the estimate: already absolute
             else:
                 if t >= mission.duration_s:
                     break
@@ -402,7 +432,8 @@ class Flight:
                 if seg is not None and seg.index != phase_idx:
                     phase_idx = seg.index
                     self.event("phase", f"{seg.phase.kind} ({seg.phase.duration_s:g} s) at t = {t:.2f} s")
-                ref = mission.reference(t)
+                r = mission.reference(t)
+                ref = r._replace(x=r.x + origin[0], y=r.y + origin[1], z=r.z + origin[2])
             # --- control, envelope, output
             raw = self.controller.step(k, state, ref)
             cmd, flags = self.envelope.apply(state, raw)
@@ -431,7 +462,11 @@ class Flight:
                 k += int(late // ts_ns)
         wall_s = time.perf_counter() - wall0
         end_state = self.estimator.state()
-        self._land(reason)
+        if reason == "vehicle_took_over":
+            self._wait_for("disarm", lambda: not self.telemetry.status.armed, self.flight_cfg.land_timeout_s,
+                           send=False)
+        else:
+            self._land(reason)
         record = None
         metrics: dict = {}
         if cmds:

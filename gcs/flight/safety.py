@@ -7,8 +7,8 @@ accelerations [rad/s^2]) with the state estimate (paper frame):
   ``+-max_angular_accel_rad_s2``;
 * tilt: when |roll| or |pitch| exceeds ``max_tilt_rad`` and the demand would
   tilt further, the demand on that axis is replaced by a levelling PD demand;
-* geofence: |x| or |y| beyond ``fence_half_width_m`` of the takeoff point, or z
-  above ``ceiling_m``, is reported as a breach (the failsafe lands; the
+* geofence: x or y farther than ``fence_half_width_m`` from the takeoff point, or
+  z more than ``ceiling_m`` above it, is reported as a breach (the failsafe lands; the
   envelope itself does not steer).
 
 :meth:`SafetyEnvelope.apply` returns the limited command and the set of
@@ -47,16 +47,18 @@ class EnvelopeLimits:
 class SafetyEnvelope:
     """Limits commands and watches the fence."""
 
-    def __init__(self, limits: EnvelopeLimits) -> None:
+    def __init__(self, limits: EnvelopeLimits, origin: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
         self.limits = limits
+        self.origin = origin
 
     def breaches(self, state: State) -> frozenset[str]:
-        """Fence breaches of the estimated state (empty when inside)."""
+        """Fence breaches of the estimated state relative to :attr:`origin`, the takeoff point."""
         lim = self.limits
+        ox, oy, oz = self.origin
         out = set()
-        if abs(state.x) > lim.fence_half_width_m or abs(state.y) > lim.fence_half_width_m:
+        if abs(state.x - ox) > lim.fence_half_width_m or abs(state.y - oy) > lim.fence_half_width_m:
             out.add("geofence")
-        if state.z > lim.ceiling_m:
+        if state.z - oz > lim.ceiling_m:
             out.add("ceiling")
         return frozenset(out)
 
