@@ -6,10 +6,11 @@ Examples::
     sitl --udp-listen 14560 --lockstep --seed 3 # GCS: udpout:127.0.0.1:14560, time advances per command
     sitl --tcp 5760                            # GCS: tcp:127.0.0.1:5760
     sitl --pty --baud 57600 --loss 0.02 --latency 0.03   # prints /dev/pts/N: a 915 MHz radio link
+    sitl --rig 4dof --lockstep --seed 1        # prints /dev/pts/N: the 4-DOF rig's XBee link (115200 baud)
 
 The first line on stdout is what the ground station passes to
-``mavutil.mavlink_connection`` (for ``--pty``: the device path).  Ctrl-C or
-SIGTERM stop it cleanly (exit 0).
+``mavutil.mavlink_connection`` (for ``--pty`` and ``--rig``: the device path).
+Ctrl-C or SIGTERM stop it cleanly (exit 0).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import logging
+import math
 import signal
 import sys
 from typing import NoReturn, Sequence
@@ -24,6 +26,10 @@ from typing import NoReturn, Sequence
 from sitl.clock import MonotonicClock
 from sitl.errors import SitlError, UsageError
 from sitl.radio import RadioParams
+from sitl.rig import RIG_KINDS, RigServer
+from sitl.rig_dynamics import RigParams
+from sitl.rig_firmware import RigSafetyParams
+from sitl.rig_sensors import RigSensorParams
 from sitl.server import SitlServer
 from sitl.simulation import InitialConditions
 from sitl.transport import PtyTransport, TcpTransport, UdpTransport, parse_host_port
@@ -51,6 +57,19 @@ conventions (ArduCopter; see sitl/autopilot.py):
                    then every stream message due is sent; no command, no time
   signing          with --signing-key, unsigned or badly signed frames are rejected and counted
                    (SYS_STATUS errors_count3); outgoing frames are signed
+
+4-DOF rig (--rig 4dof; frames and payloads: sitl/rig_protocol.py, docs/rig-protocol.md):
+  link             XBee API-mode-2 frames on a pseudo-terminal, 115200 baud unless --baud;
+                   send a HEARTBEAT first (answered by STATUS)
+  control          CONTROL (thrust N, roll/pitch/yaw angular accelerations rad/s^2) or CONTROL_PWM
+                   (four 10-bit values) at 100 Hz; the rig applies the latest at 200 Hz and sends
+                   TELEMETRY at 200 Hz; roll stops at +-15 deg, pitch at +-60 deg, no y, no yaw
+  arming           ARM only when landed; DISARM at any time (kill) also clears a cut-off
+  cut-off          |vz|, |vx|, roll/pitch rate, altitude or a CONTROL demand beyond the limits
+                   (`sitl --rig 4dof --describe`): motors off, latched until DISARM
+  watchdog         armed without a control frame for 0.5 s: level, descend at 0.3 m/s, disarm landed
+  lockstep         each CONTROL / CONTROL_PWM advances --period (10 ms = two 5 ms ticks), then
+                   the ticks' TELEMETRY frames are sent
 
 vehicles: {vehicles} (or a TOML file; see configs/vehicles/)
 """
@@ -101,12 +120,18 @@ def build_parser() -> argparse.ArgumentParser:
                      help="refuse arming for S simulated seconds after boot (a real autopilot's EKF takes ~20 s)")
     link = p.add_argument_group("link emulation (both directions)")
     link.add_argument("--baud", metavar="N", type=int, default=None,
-                      help="byte rate limit as a serial line, 10 bits/byte (default: 57600 with --pty, else none; "
-                           "0 = none)")
+                      help="byte rate limit as a serial line, 10 bits/byte (default: 115200 with --rig, 57600 with "
+                           "--pty, else none; 0 = none)")
     link.add_argument("--loss", metavar="P", type=float, default=0.0, help="probability of losing a frame (0..1)")
     link.add_argument("--latency", metavar="S", type=float, default=0.0, help="one-way latency [s]")
     link.add_argument("--signing-key", metavar="KEY", default=None,
                       help="MAVLink 2 signing: 64 hex digits, or a passphrase (key = SHA-256 of it, as MAVProxy)")
+    rig = p.add_argument_group("4-DOF rig")
+    rig.add_argument("--rig", choices=RIG_KINDS, default=None,
+                     help="emulate the paper's indoor 4-DOF rig and its XBee serial protocol instead of "
+                          "an ArduCopter; served on a pseudo-terminal (implies --pty)")
+    rig.add_argument("--bit-error-rate", metavar="P", type=float, default=None,
+                     help="with --rig: flip each bit on the link with probability P, both directions")
     other = p.add_argument_group("other")
     other.add_argument("--describe", action="store_true",
                        help="print the vehicle's derived values (hover thrust, torque normalisation) and exit")
@@ -177,7 +202,77 @@ def _describe(v: VehicleParams) -> str:
     ])
 
 
+def _describe_rig() -> str:
+    p, s, n = RigParams(), RigSafetyParams(), RigSensorParams()
+    return "\n".join([
+        f"rig              4dof: x, z, roll, pitch (y and yaw locked), mass {p.mass_kg:g} kg",
+        f"stops            roll +-{math.degrees(p.roll_stop_rad):g} deg, "
+        f"pitch +-{math.degrees(p.pitch_stop_rad):g} deg",
+        f"motors           4 x {p.max_motor_thrust_n:g} N (PWM 1023), arm {p.arm_length_m:g} m, inertia roll "
+        f"{p.inertia_roll_kg_m2:g} pitch {p.inertia_pitch_kg_m2:g} kg m^2; hover {p.hover_thrust_n:g} N",
+        f"command limits   thrust 0..{s.max_thrust_n:g} N, |angular accel| <= {s.max_angular_accel_rad_s2:g} rad/s^2",
+        f"cut-off          |vz| > {s.max_vz_m_s:g} m/s, |vx| > {s.max_vx_m_s:g} m/s, "
+        f"rate > {s.max_angular_rate_rad_s:g} rad/s, z > {s.max_altitude_m:g} m",
+        f"watchdog         {s.watchdog_timeout_s:g} s without control: descend at {s.descent_rate_m_s:g} m/s",
+        f"ultrasonic       {n.altitude_resolution_m * 100:g} cm steps, mounted {n.mount_height_m * 100:g} cm up, "
+        f"range {n.min_range_m * 100:g}..{n.max_range_m * 100:g} cm",
+    ])
+
+
+_MAVLINK_ONLY = (("vehicle", None, "--vehicle"), ("model", None, "--model"), ("wind", None, "--wind"),
+                 ("param", [], "--param"), ("sysid", None, "--sysid"), ("prearm_delay", 0.0, "--prearm-delay"),
+                 ("signing_key", None, "--signing-key"), ("start_attitude", None, "--start-attitude"),
+                 ("start_altitude", 0.0, "--start-altitude"), ("udp", None, "--udp"),
+                 ("udp_listen", None, "--udp-listen"), ("tcp", None, "--tcp"))
+
+
+def _run_rig(args: argparse.Namespace) -> int:
+    for attr, default, option in _MAVLINK_ONLY:
+        if getattr(args, attr) != default:
+            raise UsageError(f"{option}: not available with --rig (the rig is served on a pseudo-terminal)")
+    if args.describe:
+        print(_describe_rig(), flush=True)
+        return 0
+    if not 0.0 <= args.loss <= 1.0:
+        raise UsageError(f"--loss: must be in [0, 1], got {args.loss}")
+    if not args.latency >= 0.0:
+        raise UsageError(f"--latency: must be >= 0, got {args.latency}")
+    ber = 0.0 if args.bit_error_rate is None else args.bit_error_rate
+    if not 0.0 <= ber < 1.0:
+        raise UsageError(f"--bit-error-rate: must be in [0, 1), got {ber}")
+    baud = args.baud if args.baud is not None else 115200
+    if baud < 0:
+        raise UsageError(f"--baud: must be >= 0, got {baud}")
+    clock = MonotonicClock()
+    server = RigServer(PtyTransport(clock.monotonic_ns), lockstep=args.lockstep, control_period_s=args.period,
+                       seed=args.seed, radio=RadioParams(baud=baud, loss=args.loss, latency_s=args.latency),
+                       bit_error_rate=ber, clock=clock)
+    return _serve(server, f"rig {args.rig}", args)
+
+
+def _serve(server: SitlServer | RigServer, what: str, args: argparse.Namespace) -> int:
+    def on_signal(signum, frame) -> None:  # noqa: ARG001
+        server.request_stop()
+
+    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        print(server.connection_string, flush=True)
+        timing = f"lockstep {args.period:g} s" if args.lockstep else "real time"
+        print(f"sitl: {what}, {timing}, seed {args.seed}; "
+              f"ground station: {server.connection_string}", file=sys.stderr, flush=True)
+        server.run()
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+        server.close()
+    return 0
+
+
 def _run(args: argparse.Namespace) -> int:
+    if args.rig is not None:
+        return _run_rig(args)
+    if args.bit_error_rate is not None:
+        raise UsageError("--bit-error-rate: only with --rig")
     vehicle = load_vehicle(args.vehicle)
     if args.model is not None:
         vehicle = vehicle.with_model(args.model)
@@ -218,22 +313,7 @@ def _run(args: argparse.Namespace) -> int:
     server = SitlServer(transport, vehicle=vehicle, lockstep=args.lockstep, control_period_s=args.period,
                         seed=args.seed, wind=wind, initial=initial, params=params, signing_key=key, radio=radio,
                         clock=clock, prearm_delay_s=args.prearm_delay)
-
-    def on_signal(signum, frame) -> None:  # noqa: ARG001
-        server.request_stop()
-
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        print(server.connection_string, flush=True)
-        timing = f"lockstep {args.period:g} s" if args.lockstep else "real time"
-        print(f"sitl: {vehicle.name} ({vehicle.model}), {timing}, seed {args.seed}; "
-              f"ground station: {server.connection_string}", file=sys.stderr, flush=True)
-        server.run()
-    finally:
-        for s, h in old.items():
-            signal.signal(s, h)
-        server.close()
-    return 0
+    return _serve(server, f"{vehicle.name} ({vehicle.model})", args)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

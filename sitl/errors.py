@@ -7,7 +7,7 @@ traceback.
 
 from __future__ import annotations
 
-__all__ = ["SitlError", "VehicleConfigError", "TransportError", "UsageError"]
+__all__ = ["SitlError", "VehicleConfigError", "TransportError", "UsageError", "ProtocolError"]
 
 
 class SitlError(Exception):
@@ -43,3 +43,12 @@ class TransportError(SitlError, OSError):
     """An endpoint cannot be opened (port in use, no pseudo-terminal, ...)."""
 
     exit_code = 1
+
+
+class ProtocolError(SitlError, ValueError):
+    """A message cannot be encoded for the rig's serial link (a field does not fit its wire type).
+
+    Decoding never raises: bad input is counted by :class:`sitl.rig_protocol.RigDecoder`.
+    """
+
+    exit_code = 2
