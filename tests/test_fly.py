@@ -239,13 +239,18 @@ def test_telemetry_from_another_system_is_ignored():
         stop = threading.Event()
 
         def intruder():
+            # Another vehicle (system 2), and a companion computer of ours (system 1, component
+            # 191) claiming to be disarmed in another mode: neither may steer the flight.
             mav = mavlink.MAVLink(None, srcSystem=2, srcComponent=1)
+            companion = mavlink.MAVLink(None, srcSystem=1, srcComponent=191)
             s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             while not stop.is_set():
-                for m in (mav.attitude_encode(0, 1.0, -1.0, 2.0, 5.0, 5.0, 5.0),
-                          mav.local_position_ned_encode(0, 30.0, 30.0, -50.0, 3.0, 3.0, 3.0),
-                          mav.heartbeat_encode(2, 3, 0, 20, 4)):
-                    s.sendto(m.pack(mav), ("127.0.0.1", gcs_port))
+                for m, w in ((mav.attitude_encode(0, 1.0, -1.0, 2.0, 5.0, 5.0, 5.0), mav),
+                             (mav.local_position_ned_encode(0, 30.0, 30.0, -50.0, 3.0, 3.0, 3.0), mav),
+                             (mav.heartbeat_encode(2, 3, 0, 20, 4), mav),
+                             (companion.heartbeat_encode(18, 8, 0, 0, 4), companion),
+                             (companion.attitude_encode(0, 0.5, 0.5, 0.5, 1.0, 1.0, 1.0), companion)):
+                    s.sendto(m.pack(w), ("127.0.0.1", gcs_port))
                 time.sleep(0.005)
             s.close()
 
@@ -292,3 +297,52 @@ def test_a_mode_change_by_someone_else_stops_the_setpoints():
     assert any("left guided control" in e["text"] and "LAND" in e["text"] for e in result.events)
     assert 3.0 < result.duration_s < 6.0  # the mission starts after about 1.5 s of preflight
     assert snap_after["on_ground"] and not snap_after["armed"]
+
+
+@pytest.mark.parametrize("output", ["rates", "actuator"])
+def test_other_outputs_fly(tmp_path, output):
+    cfg = write_config(tmp_path, "outdoor-altitude", ALTITUDE_MISSION, "alt", 15.0)
+    p, doc = gcs_fly("--controller", "loc", "--config", str(cfg), "--sitl", "lockstep", "--output", output)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert abs(doc["metrics"]["steady_state_error_m"]) < 0.05
+    assert_landed(doc)
+
+
+def test_signed_flight():
+    key = bytes(range(32))
+    config = load_config("outdoor-altitude")
+    takeoff, hold = config.mission
+    cfg = dataclasses.replace(config, mission=(dataclasses.replace(takeoff, duration_s=2.0, z_m=1.0),
+                                               dataclasses.replace(hold, duration_s=2.0)))
+    with SitlServer(UdpTransport(("127.0.0.1", 0)), lockstep=True, seed=8, signing_key=key) as server:
+        link = MavlinkLink(server.connection_string, signing_key=key)
+        try:
+            flight = Flight(cfg, "pd", link, None, console=lambda s: None)
+            flight.preflight()
+            result = flight.fly()
+        finally:
+            link.close()
+        counters = server.snapshot()["counters"]
+    assert result.exit_reason == "completed"
+    assert link.mav.signing.sign_outgoing
+    assert result.link["received"] > 500
+    assert counters.get("unsigned", 0) <= 2, counters
+
+
+def test_interrupt_before_arming_does_not_arm(tmp_path):
+    summary = tmp_path / "s.json"
+    proc = subprocess.Popen([sys.executable, "-m", "gcs.cli", "fly", "--sitl", "lockstep", "--summary", str(summary)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        for line in proc.stdout:  # type: ignore[union-attr]
+            if line.startswith("[link] connected"):
+                break
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    doc = json.loads(summary.read_text())
+    assert proc.returncode == 7 and doc["exit_reason"] == "preflight_refused"
+    assert "interrupted before arming" in err
+    assert not any(e["kind"] == "arming" and e["text"] == "armed" for e in doc["events"])

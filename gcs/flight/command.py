@@ -100,6 +100,7 @@ def cmd_fly(args: argparse.Namespace, format_table) -> int:
                                target_component=args.target_component, signing_key=key)
             port = link.conn.port.getsockname()[1]
             sitl = EmbeddedSitl(port, lockstep=lockstep, seed=args.seed, extra_args=args.sitl_arg).start()
+            link.alive_check = sitl.check_alive
             console(f"[link] built-in SITL ({'lockstep' if lockstep else 'real time'}) on udp 127.0.0.1:{port}")
         else:
             url = args.port if args.port is not None else args.connect
@@ -117,6 +118,7 @@ def cmd_fly(args: argparse.Namespace, format_table) -> int:
                 flight.preflight(budget_ok)
             except PreflightRefused as exc:
                 console(f"[failsafe] preflight refused: {exc}")
+                flight.restore_params()
                 return _finish(args, None, "preflight_refused", config, str(exc), flight.events)
             except LinkError as exc:
                 if sitl is not None:
@@ -124,6 +126,7 @@ def cmd_fly(args: argparse.Namespace, format_table) -> int:
                 console(f"[failsafe] link error: {exc}")
                 return _finish(args, None, "link_error", config, str(exc), flight.events)
             result = flight.fly()
+            flight.restore_params()
     finally:
         link.close()
         if sitl is not None:

@@ -14,7 +14,7 @@ import subprocess
 import sys
 from typing import Sequence
 
-from gcs.errors import GcsError
+from gcs.link.mavlink import LinkError as GcsError  # a dead simulator is a link failure (exit 6)
 
 __all__ = ["EmbeddedSitl"]
 

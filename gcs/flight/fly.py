@@ -109,15 +109,22 @@ class VehicleClock:
     def now_ns(self) -> int:
         return max(self.telemetry.status.time_boot_ms * 1_000_000, self._virtual_ns)
 
+    def mark_sent(self) -> None:
+        """A command went out: the next tick waits for telemetry newer than now."""
+        self._sent_ms = self.telemetry.status.time_boot_ms
+
     def sleep_until_ns(self, deadline_ns: int) -> None:
+        # The vehicle steps once per command: wait for the telemetry of that step (newer than
+        # when the command left), not for an absolute time a lost frame would never reach.
+        sent = getattr(self, "_sent_ms", None)
         end = time.monotonic() + self.max_wait_s
-        while self.now_ns() < deadline_ns:
+        while (self.telemetry.status.time_boot_ms <= sent) if sent is not None else (self.now_ns() < deadline_ns):
             remaining = end - time.monotonic()
             if remaining <= 0:
-                self._virtual_ns = deadline_ns
                 self.timeouts += 1
-                return
+                break
             self.pump(min(remaining, 0.005))
+        self._virtual_ns = max(self._virtual_ns, deadline_ns)
 
 
 class _Interrupts:
@@ -176,7 +183,9 @@ class Flight:
         self.estimator = StateEstimator(e.ts_s, self.model, (fc.position_std_m,) * 3, config.estimator.accel_noise_std_m_s2,
                                         ground_z_m=None)
         self.telemetry = Telemetry(self.estimator, (fc.position_std_m ** 2,) * 3, (fc.velocity_std_m_s ** 2,) * 3,
-                                   on_event=self._vehicle_event)
+                                   on_event=self._vehicle_event, target_component=link.target_component)
+        self._restore: dict[str, float] = {}
+        self._link_down = False
         self.lockstep = clock is None
         self.clock: Clock = clock if clock is not None else VehicleClock(self.telemetry, self._pump_wait)
         self.stats = LoopStats(self.ts_ns)
@@ -202,12 +211,28 @@ class Flight:
     def _pump(self) -> int:
         """Drain the link into the telemetry; returns the number of messages."""
         now = self.clock.now_ns() if not self.lockstep else 0
-        msgs = self.link.drain()
+        try:
+            msgs = self.link.drain()
+        except LinkError as exc:
+            self._link_failed(exc)
+            return 0
         for m in msgs:
             self.telemetry.handle(m, now if not self.lockstep else self.clock.now_ns())
         if msgs:
             self._last_rx_wall = time.monotonic()
         return len(msgs)
+
+    def _link_failed(self, exc: Exception) -> None:
+        """A dead link shows as stale telemetry (the failsafe acts); said once."""
+        if not self._link_down:
+            self._link_down = True
+            self.event("warning", f"link failure: {exc}")
+
+    def _send(self, msg) -> None:
+        try:
+            self.link.send(msg)
+        except LinkError as exc:
+            self._link_failed(exc)
 
     def _pump_wait(self, wait_s: float) -> None:
         if self._pump() == 0:
@@ -223,6 +248,8 @@ class Flight:
             self._pump()
             if predicate():
                 return True
+            if self.interrupts.count and not self.telemetry.status.armed and what not in ("disarm",):
+                return False
             if send:
                 self._idle_tick(thrust_n)
             else:
@@ -233,7 +260,7 @@ class Flight:
                     # A lockstep simulator's time moves only with targets: a THROTTLE_IGNORE target
                     # is refused by the autopilot but moves the clock (lockstep only).
                     q = (1.0, 0.0, 0.0, 0.0)
-                    self.link.send(self.link.mav.set_attitude_target_encode(
+                    self._send(self.link.mav.set_attitude_target_encode(
                         self.telemetry.status.time_boot_ms, self.link.target_system, self.link.target_component,
                         64 | 7, q, 0.0, 0.0, 0.0, 0.0))
                 self.link.conn.select(0.005 if self.lockstep else 0.01)
@@ -266,15 +293,47 @@ class Flight:
 
     def _send_level(self, thrust_n: float) -> None:
         state = self.estimator.state()
-        self.link.send(self.adapter.level(state, thrust_n, self.telemetry.status.time_boot_ms))  # type: ignore[union-attr]
+        self._send(self.adapter.level(state, thrust_n, self.telemetry.status.time_boot_ms))  # type: ignore[union-attr]
 
     # ------------------------------------------------------------------ preflight
-    def _param(self, name: str, default: float) -> float:
+    def _param(self, name: str, default: float | None) -> float:
+        """A parameter of the vehicle; ``default=None`` makes it required (refuse without it)."""
+        self._check_interrupt()
         try:
             return self.link.param_get(name, timeout_s=1.0, retries=1, on_message=self._handle_now)
         except LinkError:
+            if default is None:
+                raise PreflightRefused(f"parameter {name} not readable; it is needed to fly") from None
             self.event("warning", f"parameter {name} not readable; assuming {default:g}")
             return default
+
+    def _set_param(self, name: str, value: float, old: float) -> float:
+        new = self.link.param_set(name, value, on_message=self._handle_now)
+        if new == value:
+            self._restore.setdefault(name, old)
+        return new
+
+    def restore_params(self) -> None:
+        """Put back the parameters changed for the flight (once the vehicle is disarmed)."""
+        for name, value in list(self._restore.items()):
+            if self.telemetry.status.armed:
+                self.event("warning", f"vehicle still armed: {name} left at its flight value")
+                continue
+            try:
+                self.link.param_set(name, value, timeout_s=1.0, retries=1, on_message=self._handle_now)
+                self.event("param", f"{name} restored to {value:g}")
+                del self._restore[name]
+            except LinkError as exc:
+                self.event("warning", f"{name} not restored: {exc}")
+
+    def _check_interrupt(self) -> None:
+        if self.interrupts.count:
+            raise PreflightRefused("interrupted before arming")
+
+    def _timesync(self) -> None:
+        self.telemetry.timesync_sent.add(self.link.send_timesync())
+        self.link.wait(lambda m: m.get_type() == "TIMESYNC" and self.telemetry.timesync_rtt_ms is not None,
+                       1.0, self._handle_now)
 
     def _handle_now(self, msg) -> None:
         self.telemetry.handle(msg, self.clock.now_ns())
@@ -285,9 +344,21 @@ class Flight:
         hb = link.wait_heartbeat(on_message=self._handle_now)
         self.event("link", f"connected to system {link.target_system} on {link.url} "
                            f"(autopilot {hb.autopilot}, type {hb.type})")
-        link.send_timesync()
-        if link.wait(lambda m: m.get_type() == "TIMESYNC" and m.tc1 != 0, 1.0, self._handle_now) is not None:
-            self.event("link", f"round trip {self.telemetry.timesync_rtt_ms:.1f} ms (TIMESYNC)")
+        self._check_interrupt()
+        st = self.telemetry.status
+        if st.armed:
+            raise PreflightRefused(f"the vehicle is already armed (mode {st.mode}); gcs fly starts from a "
+                                   "disarmed vehicle on the ground")
+        self._timesync()
+        rtt = self.telemetry.timesync_rtt_ms
+        if rtt is not None:
+            self.event("link", f"round trip {rtt:.1f} ms (TIMESYNC)")
+            if rtt / 1000.0 > fc.telemetry_stale_s:
+                raise PreflightRefused(f"link round trip {rtt:.0f} ms exceeds the telemetry stale timeout "
+                                       f"({fc.telemetry_stale_s * 1000:.0f} ms): telemetry would arrive too late "
+                                       "to control (lower the stream rates or raise the baud rate)")
+        else:
+            self.event("warning", "no TIMESYNC reply: link latency unknown")
         if not budget_ok:
             raise PreflightRefused("link budget exceeded (see above); use --force-budget to fly anyway")
         rates = {mavlink.MAVLINK_MSG_ID_ATTITUDE: fc.telemetry_rate_hz,
@@ -299,20 +370,20 @@ class Flight:
                 self.event("warning", f"stream {mid} at {hz:g} Hz not accepted (MAV_RESULT {res})")
         guid = self._param("GUID_OPTIONS", 0.0)
         if not int(guid) & 8:
-            new = link.param_set("GUID_OPTIONS", float(int(guid) | 8), on_message=self._handle_now)
+            new = self._set_param("GUID_OPTIONS", float(int(guid) | 8), guid)
             if not int(new) & 8:
                 raise PreflightRefused("the vehicle did not accept GUID_OPTIONS bit 3 (thrust as thrust)")
             self.event("param", f"GUID_OPTIONS {int(guid)} -> {int(new)} (thrust field is thrust)")
         # Our controllers divide the thrust by cos(roll) cos(pitch) themselves: ArduPilot's angle
         # boost would do it a second time.
-        boost = self._param("ATC_ANGLE_BOOST", 0.0)
+        boost = self._param("ATC_ANGLE_BOOST", None)
         if boost:
-            new = link.param_set("ATC_ANGLE_BOOST", 0.0, on_message=self._handle_now)
+            new = self._set_param("ATC_ANGLE_BOOST", 0.0, boost)
             if new:
                 raise PreflightRefused("the vehicle did not accept ATC_ANGLE_BOOST = 0 (thrust tilt compensation "
                                        "is done by the controller)")
             self.event("param", "ATC_ANGLE_BOOST 1 -> 0 (the controller compensates tilt)")
-        hover = self._param("MOT_THST_HOVER", 0.4)
+        hover = self._param("MOT_THST_HOVER", None)
         gains = tuple(self._param(f"ATC_ANG_{ax}_P", 4.5) for ax in ("RLL", "PIT", "YAW"))
         self.adapter = OutputAdapter(OutputModel(
             kind=self.output_kind, mass_kg=self.model.mass_kg, gravity_m_s2=self.model.gravity_m_s2,
@@ -331,6 +402,7 @@ class Flight:
                 self.event("warning", "no battery voltage reported; battery not checked")
             elif volt < fc.min_battery_v:
                 raise PreflightRefused(f"battery {volt:.2f} V below {fc.min_battery_v:g} V")
+        self._check_interrupt()
         res = link.set_mode("GUIDED_NOGPS", on_message=self._handle_now)
         if res != mavlink.MAV_RESULT_ACCEPTED:
             raise PreflightRefused(f"mode GUIDED_NOGPS refused (MAV_RESULT {res})")
@@ -339,9 +411,13 @@ class Flight:
         for _ in range(int(round(0.5 / self.config.experiment.ts_s))):
             self._pump()
             self._idle_tick(0.0)
+        self._check_interrupt()
         res = link.arm(True, on_message=self._handle_now)
         if res != mavlink.MAV_RESULT_ACCEPTED:
-            why = self.telemetry.status.statustext[-1] if self.telemetry.status.statustext else f"MAV_RESULT {res}"
+            # The reason comes as STATUSTEXT, before or just after the acknowledgement.
+            link.wait(lambda m: m.get_type() == "STATUSTEXT", 0.5, self._handle_now)
+            texts = [t for t in self.telemetry.status.statustext if "arm" in t.lower()]
+            why = texts[-1] if texts else f"MAV_RESULT {res}"
             raise PreflightRefused(f"arming refused: {why}")
         if not self._wait_for("armed", lambda: self.telemetry.status.armed, 3.0):
             raise PreflightRefused("the vehicle acknowledged arming but does not report armed")
@@ -442,7 +518,9 @@ class Flight:
             self._limit_flags_seen |= flags
             c3 = time.perf_counter_ns()
             fields = self.adapter.fields(state, cmd)  # type: ignore[union-attr]
-            self.link.send(self.adapter.encode(fields, self.telemetry.status.time_boot_ms))  # type: ignore[union-attr]
+            self._send(self.adapter.encode(fields, self.telemetry.status.time_boot_ms))  # type: ignore[union-attr]
+            if isinstance(self.clock, VehicleClock):
+                self.clock.mark_sent()
             c4 = time.perf_counter_ns()
             self.stats.record(late, {"decode": c1 - c0, "estimate": c2 - c1, "control": c3 - c2, "send": c4 - c3})
             self._last_cmd = cmd
@@ -451,8 +529,11 @@ class Flight:
             cmds.append(cmd)
             js.append((horizon.last_steps_to_go or 0) if horizon is not None else 0)
             if k % 100 == 0:  # once a second: the ground station is alive, and how late is the link
-                self.link.send_heartbeat()
-                self.link.send_timesync()
+                try:
+                    self.link.send_heartbeat()
+                    self.telemetry.timesync_sent.add(self.link.send_timesync())
+                except LinkError as exc:
+                    self._link_failed(exc)
             if t >= next_live:
                 next_live = t + self.live_period_s
                 self.console(f"t {t:7.2f} s  z {state.z:6.3f} m  ref {ref.z:6.3f} m  err {ref.z - state.z:+.3f} m  "
@@ -508,9 +589,21 @@ class Flight:
         except LinkError as exc:
             self.event("warning", f"LAND not acknowledged: {exc}")
         self.event("phase", "landing (LAND mode)")
-        # Should LAND not have been taken, 90 % of hover thrust, level, still brings it down gently.
-        landed = self._wait_for("disarm", lambda: not self.telemetry.status.armed or self.interrupts.count >= 3,
-                                self.flight_cfg.land_timeout_s, thrust_n=0.9 * self.model.hover_thrust_n)
+        # LAND is sent again twice a second until the vehicle reports it (or while nothing is
+        # heard): a lost frame must not leave the vehicle in guided mode.  Should LAND never be
+        # taken, 90 % of hover thrust, level, still brings it down gently.
+        next_land = [time.monotonic() + 0.5]
+
+        def done() -> bool:
+            st = self.telemetry.status
+            if st.armed and st.custom_mode != 9 and time.monotonic() >= next_land[0]:
+                next_land[0] = time.monotonic() + 0.5
+                self._send(self.link.mav.command_long_encode(
+                    self.link.target_system, self.link.target_component, mavlink.MAV_CMD_DO_SET_MODE, 0,
+                    mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 9, 0, 0, 0, 0, 0))
+            return not st.armed or self.interrupts.count >= 3
+
+        landed = self._wait_for("disarm", done, self.flight_cfg.land_timeout_s, thrust_n=0.9 * self.model.hover_thrust_n)
         landed = landed and not self.telemetry.status.armed
         if landed:
             self.event("landed", "landed and disarmed")

@@ -120,7 +120,7 @@ class OutputAdapter:
         thrust = m.thrust_norm(cmd.thrust_n)
         if m.kind == "actuator":
             controls = [max(-1.0, min(1.0, i * a / t)) for i, a, t in zip(m.inertia_kg_m2, alpha, m.max_torque_nm)]
-            return {"message": "SET_ACTUATOR_CONTROL_TARGET", "controls": controls + [thrust, 0.0, 0.0, 0.0]}
+            return {"message": "SET_ACTUATOR_CONTROL_TARGET", "controls": controls + [thrust, 0.0, 0.0, 0.0, 0.0]}
         omega = euler_rates_to_body_rates(state.roll, state.pitch, state.roll_rate, state.pitch_rate, state.yaw_rate)
         rates = [w + a / k for w, a, k in zip(omega, alpha, m.rate_gain_1_s)]
         q_now = euler_to_quaternion(state.roll, state.pitch, state.yaw)

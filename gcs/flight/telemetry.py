@@ -52,7 +52,8 @@ class Telemetry:
     """
 
     def __init__(self, estimator: StateEstimator, position_var_m2=(0.0025,) * 3, velocity_var_m2_s2=(0.0025,) * 3,
-                 on_event: Callable[[str, str], None] | None = None) -> None:
+                 on_event: Callable[[str, str], None] | None = None, target_component: int = 1) -> None:
+        self.target_component = target_component
         self.estimator = estimator
         self.position_var = tuple(position_var_m2)
         self.velocity_var = tuple(velocity_var_m2_s2)
@@ -61,6 +62,7 @@ class Telemetry:
         self.last_ns: dict[str, int] = {}
         self.timesync_rtt_ms: float | None = None
         self.timesync_samples_ms: list[float] = []
+        self.timesync_sent: set[int] = set()
 
     def _event(self, kind: str, text: str) -> None:
         if self.on_event is not None:
@@ -68,6 +70,8 @@ class Telemetry:
 
     def handle(self, msg, now_ns: int) -> None:
         """Take one message received at loop time ``now_ns``."""
+        if msg.get_srcComponent() != self.target_component:
+            return  # a companion computer or gimbal of the same system: not the autopilot
         t = msg.get_type()
         self.last_ns[t] = now_ns
         st = self.status
@@ -98,10 +102,11 @@ class Telemetry:
             text = text.rstrip("\x00")
             st.statustext.append(text)
             self._event("statustext", text)
-        elif t == "TIMESYNC" and msg.tc1 != 0:
+        elif t == "TIMESYNC" and msg.ts1 in self.timesync_sent:
             # Our request carried ts1 = our wall-clock monotonic ns (not the loop clock, which
             # is the vehicle's own in lockstep); the reply echoes it.
             rtt_ms = (time.monotonic_ns() - msg.ts1) / 1e6
+            self.timesync_sent.discard(msg.ts1)
             if 0.0 <= rtt_ms < 60_000.0:
                 self.timesync_rtt_ms = rtt_ms
                 self.timesync_samples_ms.append(rtt_ms)

@@ -142,7 +142,8 @@ def suggest_fixes(budget: LinkBudget, control_rate_hz: float, output: str = "att
         nb = compute_budget(control_streams(rate, rate, output), budget.baud, signed=budget.signed,
                             max_utilisation=budget.max_utilisation)
         if nb.fits:
-            out.append(f"--rate {rate:g} (control and telemetry at {rate:g} Hz; changes the discretisation)")
+            out.append(f"control and telemetry at {rate:g} Hz: [experiment] ts_s = {1 / rate:g} in the config "
+                       "(changes the discretisation the gains are designed for)")
             break
     if budget.air_capacity_bytes_s is not None:
         out.append("radio: ECC off, or a higher air rate (the air link is shared by both directions)")

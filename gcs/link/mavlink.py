@@ -17,13 +17,20 @@ The link knows nothing of the paper's frame; :mod:`gcs.flight.telemetry` convert
 from __future__ import annotations
 
 import errno
+import os
 import socket
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Iterable
 
-from pymavlink import mavutil
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
+# MAVLink 2 on the wire (signing, extensions): pymavlink picks its protocol module from this
+# variable, so it is set before the dialect is loaded.
+os.environ["MAVLINK20"] = "1"
+
+from pymavlink import mavutil  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
+
+mavutil.set_dialect("ardupilotmega")
 
 from gcs.errors import GcsError
 
@@ -92,10 +99,11 @@ class MavlinkLink:
             self.conn = mavutil.mavlink_connection(url, baud=baud, source_system=source_system,
                                                    source_component=source_component, autoreconnect=False,
                                                    robust_parsing=True, dialect="ardupilotmega")
-        except (OSError, ValueError) as exc:
+        except (OSError, ValueError, OverflowError) as exc:
             raise LinkError(f"cannot open {url!r}: {exc}") from None
-        self.conn.WIRE_PROTOCOL_VERSION = "2.0"
-        self.conn.mav.WIRE_PROTOCOL_VERSION = "2.0"
+        self._pending: list = []
+        #: Called while waiting for the heartbeat; raises if the peer cannot answer (a dead child).
+        self.alive_check: Callable[[], None] | None = None
         if signing_key is not None:
             if len(signing_key) != 32:
                 raise LinkError(f"signing key must be 32 bytes, got {len(signing_key)}")
@@ -156,7 +164,7 @@ class MavlinkLink:
 
     def drain(self) -> list:
         """Every message waiting now from the target system (never blocks)."""
-        out = []
+        out, self._pending = self._pending, []
         recv = self.conn.recv_msg
         while True:
             try:
@@ -174,10 +182,13 @@ class MavlinkLink:
         received meanwhile is also passed to ``on_message``."""
         deadline = time.monotonic() + timeout_s
         while True:
-            for msg in self.drain():
+            batch = self.drain()
+            for i, msg in enumerate(batch):
                 if on_message is not None:
                     on_message(msg)
                 if predicate(msg):
+                    # What came after the awaited message is not lost: the next drain returns it.
+                    self._pending = batch[i + 1:] + self._pending
                     return msg
             remaining = deadline - time.monotonic()
             if remaining <= 0:
@@ -188,6 +199,8 @@ class MavlinkLink:
         """The first HEARTBEAT of the target, sending ours meanwhile (so UDP-out peers learn our address)."""
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
+            if self.alive_check is not None:
+                self.alive_check()
             self.send_heartbeat()
             hb = self.wait(lambda m: m.get_type() == "HEARTBEAT" and m.get_srcComponent() == self.target_component,
                            min(1.0, max(0.0, deadline - time.monotonic())), on_message)
@@ -210,9 +223,11 @@ class MavlinkLink:
     def send_heartbeat(self) -> None:
         self.send(self.mav.heartbeat_encode(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0))
 
-    def send_timesync(self) -> None:
-        """TIMESYNC request stamped with our monotonic clock [ns]; the reply gives the round trip."""
-        self.send(self.mav.timesync_encode(0, time.monotonic_ns()))
+    def send_timesync(self) -> int:
+        """TIMESYNC request stamped with our monotonic clock [ns] (returned); the reply echoes it."""
+        ts1 = time.monotonic_ns()
+        self.send(self.mav.timesync_encode(0, ts1))
+        return ts1
 
     def command_long(self, command: int, params: Iterable[float], timeout_s: float = 3.0, retries: int = 2,
                      on_message=None) -> int:
