@@ -99,8 +99,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-noise", action="store_true", help="ideal sensors: feed the true state back")
     s.add_argument("--json", action="store_true", help="print one JSON object instead of the table")
     s.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
+    from gcs.log.cli import add_log_parser, add_sim_log_arguments
+    add_sim_log_arguments(s)
 
     sub.add_parser("configs", help="list the bundled experiment configs")
+
+    add_log_parser(sub)
 
     from gcs.flight.command import add_fly_parser
     add_fly_parser(sub, _positive_int, _positive_float)
@@ -151,8 +155,11 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     def progress(name: str, i: int, n: int) -> None:
         print(f"\r  flying {name:<14} run {i + 1}/{n}", end="", file=sys.stderr, flush=True)
 
-    result = run_experiment(config, controllers, runs=args.runs, seed=args.seed, options=options,
-                            progress=None if (args.quiet or args.json or not sys.stderr.isatty()) else progress)
+    from gcs.log.cli import open_sim_log
+    with open_sim_log(args, config, controllers, options) as log:
+        result = run_experiment(config, controllers, runs=args.runs, seed=args.seed, options=options,
+                                progress=None if (args.quiet or args.json or not sys.stderr.isatty()) else progress,
+                                log=log)
     if not (args.quiet or args.json or not sys.stderr.isatty()):
         print("\r" + " " * 40 + "\r", end="", file=sys.stderr, flush=True)
     doc = result.to_json()
@@ -200,6 +207,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             return cmd_fly(args, format_table)
         if args.command == "link-budget":
             return _cmd_link_budget(args)
+        if args.command == "log":
+            from gcs.log.cli import cmd_log
+            return cmd_log(args)
         if args.command == "configs":
             for name in bundled_configs():
                 print(f"{name:20s} {load_config(name).experiment.description}")

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -75,7 +75,8 @@ class SimRun:
 
 
 def simulate(config: Config, controller: str, *, run: int = 0, seed: int | None = None,
-             options: SimOptions = SimOptions(), designed: Controller | None = None) -> SimRun:
+             options: SimOptions = SimOptions(), designed: Controller | None = None,
+             log: Any = None) -> SimRun:
     """Fly ``controller`` on the reduced plant for the config's mission.
 
     Parameters
@@ -91,6 +92,10 @@ def simulate(config: Config, controller: str, *, run: int = 0, seed: int | None 
     designed : Controller or None
         An already designed ``controller`` for this config to reuse (it is reset);
         None designs one.
+    log : gcs.log.FlightLog, gcs.log.simlog.BackgroundSimLog or None
+        Log every control tick of this flight (estimate, reference, error, command,
+        horizon, cost, truth, phase events; see :mod:`gcs.log.simlog`), appended after
+        what the log already holds.  None: no logging.
 
     Returns
     -------
@@ -133,6 +138,12 @@ def simulate(config: Config, controller: str, *, run: int = 0, seed: int | None 
     j_log = []
     last = None
     calm = (0.0, 0.0, 0.0)
+    cost = controller_cost(controller, config)
+    recorder = None
+    if log is not None:
+        from gcs.log.simlog import SimRecorder
+        recorder = SimRecorder(log, config, ctl, controller, run=run, seed=seed, mission=mission, steps=steps,
+                               cost=cost, states=states, refs=refs, cmds=cmds, j_log=j_log)
     for k in range(steps):
         ref = mission.reference(k * ts)
         if sensors is not None:
@@ -146,10 +157,14 @@ def simulate(config: Config, controller: str, *, run: int = 0, seed: int | None 
         cmds.append(cmd)
         j_log.append((horizon.last_steps_to_go or 0) if horizon is not None else 0)
         last = cmd
+        if recorder is not None:
+            recorder.tick(est)
     refs.append(mission.reference(steps * ts))
     rec = FlightRecord(ts, np.array(states, float), np.array(refs, float), np.array(cmds, float),
                        np.array(j_log, dtype=np.int64))
-    metrics = flight_metrics(rec, config, mission, controller_cost(controller, config))
+    metrics = flight_metrics(rec, config, mission, cost)
+    if recorder is not None:
+        recorder.finish(metrics)
     return SimRun(controller, run, seed, rec, metrics)
 
 
@@ -174,8 +189,12 @@ class ExperimentResult:
 
 def run_experiment(config: Config, controllers: Sequence[str], *, runs: int | None = None, seed: int | None = None,
                    options: SimOptions = SimOptions(),
-                   progress: Callable[[str, int, int], None] | None = None) -> ExperimentResult:
-    """Fly every controller ``runs`` times (seeds ``(seed, i)``) and collect metrics."""
+                   progress: Callable[[str, int, int], None] | None = None,
+                   log: Any = None) -> ExperimentResult:
+    """Fly every controller ``runs`` times (seeds ``(seed, i)``) and collect metrics.
+
+    ``log`` (see :func:`simulate`) receives every flight, one after the other.
+    """
     for name in controllers:
         if name not in CONTROLLERS:
             raise SimError(f"unknown controller {name!r}")
@@ -190,6 +209,6 @@ def run_experiment(config: Config, controllers: Sequence[str], *, runs: int | No
         for i in range(runs):
             if progress is not None:
                 progress(name, i, runs)
-            run = simulate(config, name, run=i, seed=seed, options=options, designed=designed)
+            run = simulate(config, name, run=i, seed=seed, options=options, designed=designed, log=log)
             result.per_run[name].append(run.metrics)
     return result

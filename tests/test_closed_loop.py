@@ -106,7 +106,7 @@ def test_controllers_reset_and_share_the_interface(outdoor):
 
 def test_cli_json_schema():
     p = subprocess.run([sys.executable, "-m", "gcs.cli", "sim", "--config", "indoor-4dof", "--controller", "all",
-                        "--runs", "2", "--duration", "5", "--json"], capture_output=True, text=True, timeout=300)
+                        "--runs", "2", "--duration", "5", "--json", "--no-log"], capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr
     doc = json.loads(p.stdout)
     assert doc["experiment"] == "indoor-4dof" and doc["runs"] == 2 and doc["duration_s"] == 5.0
@@ -135,7 +135,7 @@ def test_cli_rejects_short_durations_and_printed_matrices_fly():
                        capture_output=True, text=True, timeout=120)
     assert p.returncode == 2 and "duration" in p.stderr and "Traceback" not in p.stderr
     p = subprocess.run([sys.executable, "-m", "gcs.cli", "sim", "--config", "outdoor-altitude", "--controller", "nlsoc",
-                        "--matrices", "printed", "--runs", "1", "--duration", "2", "--json"],
+                        "--matrices", "printed", "--runs", "1", "--duration", "2", "--json", "--no-log"],
                        capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
     p = subprocess.run([sys.executable, "-m", "gcs.cli", "sim", "--config", "indoor-4dof", "--wind", "--duration", "1"],
@@ -145,6 +145,6 @@ def test_cli_rejects_short_durations_and_printed_matrices_fly():
 
 def test_cli_table():
     p = subprocess.run([sys.executable, "-m", "gcs.cli", "sim", "--config", "outdoor-altitude", "--controller", "pd",
-                        "--runs", "1", "--duration", "3", "-q"], capture_output=True, text=True, timeout=300)
+                        "--runs", "1", "--duration", "3", "-q", "--no-log"], capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr
     assert "outdoor-altitude: 1 run(s) x 3 s" in p.stdout and "J_e = sum||e||" in p.stdout

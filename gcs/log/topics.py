@@ -1,0 +1,136 @@
+"""Topic names, message fields and their JSON schemas (one place for writer and readers).
+
+Every message is a JSON object; each topic has a ``jsonschema`` schema with the
+fields, their types and units (Foxglove Studio shows the descriptions).  See
+:mod:`gcs.log` for what each topic means.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Mapping
+
+__all__ = [
+    "STATE_FIELDS", "COMMAND_FIELDS", "HORIZON_FIELDS", "COST_FIELDS", "FIXED_FIELDS",
+    "STATE", "REFERENCE", "ERROR", "COMMAND", "COMMAND_LIMITED", "HORIZON", "COST", "TRUTH",
+    "TIMING", "EVENTS", "FLIGHT", "SIM_METRICS", "MAVLINK_RAW", "MAVLINK_IN", "MAVLINK_OUT",
+    "schema_for", "schema_json", "mavlink_topic",
+]
+
+STATE = "/control/state"
+REFERENCE = "/control/reference"
+ERROR = "/control/error"
+COMMAND = "/control/command"
+COMMAND_LIMITED = "/control/command_limited"
+HORIZON = "/control/horizon"
+COST = "/control/cost"
+TRUTH = "/sim/truth"
+SIM_METRICS = "/sim/metrics"
+TIMING = "/loop/timing"
+EVENTS = "/events"
+FLIGHT = "/flight"
+MAVLINK_RAW = "/mavlink/raw"
+MAVLINK_IN = "/mavlink/in/"
+MAVLINK_OUT = "/mavlink/out/"
+
+#: State fields in :class:`gcs.model.State` order (paper frame, z up) with units.
+STATE_FIELDS = ("x", "y", "z", "vx", "vy", "vz", "roll", "pitch", "yaw", "roll_rate", "pitch_rate", "yaw_rate")
+_STATE_UNITS = ("m, north", "m, east", "m, up", "m/s, north", "m/s, east", "m/s, up",
+                "rad", "rad", "rad", "rad/s", "rad/s", "rad/s")
+#: Command fields in :class:`gcs.model.Command` order.
+COMMAND_FIELDS = ("thrust_n", "roll_accel_rad_s2", "pitch_accel_rad_s2", "yaw_accel_rad_s2")
+_COMMAND_UNITS = ("collective thrust [N]", "roll angular acceleration [rad/s^2]",
+                  "pitch angular acceleration [rad/s^2]", "yaw angular acceleration [rad/s^2]")
+HORIZON_FIELDS = ("k", "steps_to_go", "mode")
+COST_FIELDS = ("state_cost", "input_cost", "stage_cost")
+
+#: Topics whose messages always carry exactly these numeric fields, in this order
+#: (the writer's fast path :meth:`gcs.log.FlightLog.write_values`).
+FIXED_FIELDS: dict[str, tuple[str, ...]] = {
+    STATE: STATE_FIELDS, REFERENCE: STATE_FIELDS, ERROR: STATE_FIELDS, TRUTH: STATE_FIELDS,
+    COMMAND: COMMAND_FIELDS, COMMAND_LIMITED: COMMAND_FIELDS, COST: COST_FIELDS,
+}
+
+
+def _numbers(fields, descriptions) -> dict:
+    return {f: {"type": "number", "description": d} for f, d in zip(fields, descriptions)}
+
+
+def _obj(title: str, description: str, properties: Mapping[str, dict], required=(), extra: bool = False) -> dict:
+    return {"$schema": "http://json-schema.org/draft-07/schema#", "title": title, "description": description,
+            "type": "object", "properties": dict(properties), "required": list(required),
+            "additionalProperties": extra}
+
+
+_STATE_PROPS = _numbers(STATE_FIELDS, [f"[{u}]" for u in _STATE_UNITS])
+_CMD_PROPS = _numbers(COMMAND_FIELDS, _COMMAND_UNITS)
+
+_SCHEMAS: dict[str, tuple[str, dict]] = {
+    STATE: ("gcs.State", _obj("State estimate", "Paper frame (x north, y east, z up), SI units", _STATE_PROPS, STATE_FIELDS)),
+    REFERENCE: ("gcs.State", _obj("State", "Paper frame (x north, y east, z up), SI units", _STATE_PROPS, STATE_FIELDS)),
+    TRUTH: ("gcs.State", _obj("State", "Paper frame (x north, y east, z up), SI units", _STATE_PROPS, STATE_FIELDS)),
+    ERROR: ("gcs.StateError", _obj("Tracking error", "reference - estimate (yaw wrapped to [-pi, pi))",
+                                   _STATE_PROPS, STATE_FIELDS)),
+    COMMAND: ("gcs.Command", _obj("Command", "Controller output (before the safety envelope)", _CMD_PROPS, COMMAND_FIELDS)),
+    COMMAND_LIMITED: ("gcs.Command", _obj("Command", "Command after the safety envelope (what was sent)",
+                                          _CMD_PROPS, COMMAND_FIELDS)),
+    HORIZON: ("gcs.Horizon", _obj("Horizon", "Finite-horizon schedule of this tick", {
+        "k": {"type": "integer", "description": "control step index since the start of the flight"},
+        "steps_to_go": {"type": "integer", "description": "j >= 1 used by the finite-horizon law; 0 when another law flew"},
+        "mode": {"type": "string", "description": "horizon | terminal | restart | fallback_pd | pd"},
+    }, HORIZON_FIELDS)),
+    COST: ("gcs.StageCost", _obj("Stage cost", "Terms of the controller's own cost J at this tick "
+                                 "(eq. 5 for LOC, eq. 17 for NLSOC), each with the factor 1/2", _numbers(
+                                     COST_FIELDS, ("1/2 x'Qx", "1/2 u'Ru", "state_cost + input_cost")),
+                                 COST_FIELDS)),
+    TIMING: ("gcs.LoopTiming", _obj("Loop timing", "One control tick's timing [s]", {
+        "k": {"type": "integer"},
+        "jitter_s": {"type": "number", "description": "tick start minus its deadline [s]"},
+        "tick_s": {"type": "number", "description": "compute time of the tick [s]"},
+        "deadline_missed": {"type": "boolean"},
+    }, extra=True)),
+    EVENTS: ("gcs.Event", _obj("Event", "Mode changes, arming, failsafes, warnings, phase changes", {
+        "kind": {"type": "string"}, "text": {"type": "string"},
+    }, ("kind", "text"), extra=True)),
+    FLIGHT: ("gcs.Flight", _obj("Flight", "Start of a flight: every message from here to the next /flight "
+                                "message belongs to it", {
+        "flight": {"type": "integer", "description": "flight index in this file"},
+        "controller": {"type": "string"}, "experiment": {"type": "string"},
+        "run": {"type": "integer"}, "seed": {"type": ["integer", "null"]},
+        "ts_s": {"type": "number", "description": "control period [s]"},
+        "steps": {"type": ["integer", "null"], "description": "planned control steps"},
+        "source": {"type": "string", "description": "sim | flight"},
+    }, ("flight", "controller"), extra=True)),
+    SIM_METRICS: ("gcs.Metrics", _obj("Metrics", "The metrics gcs sim computed in the run (see gcs.metrics)", {
+        "flight": {"type": "integer"},
+    }, ("flight",), extra=True)),
+    MAVLINK_RAW: ("gcs.MavlinkFrame", _obj("MAVLink frame", "A raw MAVLink frame as sent or received (replayable)", {
+        "dir": {"type": "string", "enum": ["in", "out"]},
+        "type": {"type": "string", "description": "message type name"},
+        "data_b64": {"type": "string", "contentEncoding": "base64", "description": "frame bytes, base64"},
+    }, ("dir", "data_b64"))),
+}
+
+
+def mavlink_topic(direction: str, msg_type: str) -> str:
+    """``/mavlink/in/<TYPE>`` or ``/mavlink/out/<TYPE>``."""
+    if direction not in ("in", "out"):
+        raise ValueError(f"direction must be 'in' or 'out', got {direction!r}")
+    return f"/mavlink/{direction}/{msg_type}"
+
+
+def schema_for(topic: str) -> tuple[str, dict]:
+    """``(schema name, jsonschema dict)`` of a topic; an open object schema for unknown topics."""
+    known = _SCHEMAS.get(topic)
+    if known is not None:
+        return known
+    if topic.startswith(MAVLINK_IN) or topic.startswith(MAVLINK_OUT):
+        msg_type = topic.rsplit("/", 1)[-1]
+        return (f"mavlink.{msg_type}", _obj(msg_type, "MAVLink message fields as decoded by pymavlink", {}, extra=True))
+    return ("gcs.Message", _obj(topic, "", {}, extra=True))
+
+
+def schema_json(topic: str) -> tuple[str, bytes]:
+    """``(schema name, schema as JSON bytes)`` of a topic."""
+    name, schema = schema_for(topic)
+    return name, json.dumps(schema, separators=(",", ":")).encode()
