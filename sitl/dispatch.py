@@ -184,8 +184,9 @@ class Dispatcher:
             if not math.isfinite(p[0]):
                 result = _DENIED
             else:
-                replies.append(M.MAVLink_message_interval_message(int(p[0]) & 0xFFFF,
-                                                                  self.streams.interval_us(int(p[0]))))
+                # The field is int32: an interval set beyond it (a hostile request) reads back clamped.
+                interval = max(-1, min(int(self.streams.interval_us(int(p[0]))), 2**31 - 1))
+                replies.append(M.MAVLink_message_interval_message(int(p[0]) & 0xFFFF, interval))
                 result = _ACCEPTED
         elif cmd == M.MAV_CMD_REQUEST_MESSAGE:
             result = _FAILED

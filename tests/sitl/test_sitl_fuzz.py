@@ -208,3 +208,11 @@ def test_tcp_stream_resynchronises_after_garbage():
         s.close()
     finally:
         srv.stop()
+
+
+def test_huge_message_interval_reads_back_clamped(harness):
+    errors = harness.counters.handler_errors
+    harness._process([("c", pack(M.MAVLink_command_long_message(1, 1, 511, 0, 30, 3e12, 0, 0, 0, 0, 0)), True),
+                      ("c", pack(M.MAVLink_command_long_message(1, 1, 510, 0, 30, 0, 0, 0, 0, 0, 0)), True)])
+    assert harness.counters.handler_errors == errors
+    harness._out.clear()
