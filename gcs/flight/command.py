@@ -10,7 +10,6 @@ from pathlib import Path
 
 from gcs.config import load_config
 from gcs.control import CONTROLLERS
-from gcs.errors import ConfigError, GcsError
 from gcs.flight.clock import MonotonicClock
 from gcs.flight.embedded import EmbeddedSitl
 from gcs.flight.fly import EXIT_CODES, Flight, FlightResult, PreflightRefused, _Interrupts
@@ -159,5 +158,3 @@ def _finish(args, result: FlightResult | None, reason: str, config, detail: str 
         print(f"gcs fly: {reason} (exit {EXIT_CODES[reason]})" + (f": {detail}" if detail else ""), file=sys.stderr)
     return EXIT_CODES[reason]
 
-
-_ = (ConfigError, GcsError)

@@ -42,8 +42,6 @@ import math
 from dataclasses import dataclass
 from typing import Sequence
 
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
-
 from gcs.frames import euler_accel_to_body_accel, euler_rates_to_body_rates, euler_to_quaternion
 from gcs.model import Command, State
 
@@ -154,5 +152,3 @@ class OutputAdapter:
                                                    self.target_component, IGNORE_RATES, q, 0.0, 0.0, 0.0,
                                                    self.model.thrust_norm(thrust_n))
 
-
-_ = mavlink  # the dialect the adapter's ``mav`` must speak
