@@ -238,8 +238,40 @@ class Config:
         """A copy flying the ``corrected`` or the ``printed`` matrices (re-validated)."""
         if mode not in MATRIX_MODES:
             raise ConfigError(self.source, "experiment.matrices", f"must be one of {MATRIX_MODES}, got {mode!r}")
+        return self.with_changes("experiment", matrices=mode)
+
+    def with_changes(self, section: str, **values: Any) -> "Config":
+        """A copy with keys of a top-level ``section`` set (re-validated; ``raw`` records them, so a
+        log's ``config.json`` is the config flown).
+
+        Raises
+        ------
+        ConfigError
+            When a value is invalid, naming ``section.key``.
+        """
         raw = {k: v for k, v in self.raw.items()}
-        raw["experiment"] = dict(raw["experiment"], matrices=mode)
+        raw[section] = dict(raw.get(section, {}), **values)
+        return parse_config(raw, self.source)
+
+    def with_duration(self, duration_s: float) -> "Config":
+        """A copy whose mission ends at ``duration_s`` [s]: later phases dropped, the last one cut.
+
+        Raises
+        ------
+        ConfigError
+            When ``duration_s`` is not positive.
+        """
+        if not (isinstance(duration_s, (int, float)) and math.isfinite(duration_s) and duration_s > 0):
+            raise ConfigError(self.source, "--duration", f"must be a finite number > 0, got {duration_s!r}")
+        phases, t = [], 0.0
+        for ph in self.raw["mission"]["phases"]:
+            if t >= duration_s - 1e-12:
+                break
+            d = float(ph["duration_s"])
+            phases.append(dict(ph, duration_s=min(d, duration_s - t)))
+            t += d
+        raw = {k: v for k, v in self.raw.items()}
+        raw["mission"] = dict(raw["mission"], phases=phases)
         return parse_config(raw, self.source)
 
 

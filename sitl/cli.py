@@ -136,6 +136,9 @@ def build_parser() -> argparse.ArgumentParser:
     other.add_argument("--describe", action="store_true",
                        help="print the vehicle's derived values (hover thrust, torque normalisation) and exit")
     other.add_argument("-v", "--verbose", action="count", default=0, help="log to stderr (-vv: debug)")
+    other.add_argument("--parent-pid", type=int, metavar="PID",
+                       help="stop when process PID (the ground station that started this SITL) is gone, "
+                            "even if it was killed without a word")
     return p
 
 
@@ -250,11 +253,27 @@ def _run_rig(args: argparse.Namespace) -> int:
     return _serve(server, f"rig {args.rig}", args)
 
 
+def _watch_parent(pid: int, stop) -> None:
+    """Call ``stop`` once ``pid`` is no longer this process's parent (it died; we were re-parented)."""
+    import os
+    import threading
+    import time
+
+    def watch() -> None:
+        while os.getppid() == pid:
+            time.sleep(0.2)
+        stop()
+
+    threading.Thread(target=watch, name="sitl-parent-watch", daemon=True).start()
+
+
 def _serve(server: SitlServer | RigServer, what: str, args: argparse.Namespace) -> int:
     def on_signal(signum, frame) -> None:  # noqa: ARG001
         server.request_stop()
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    if getattr(args, "parent_pid", None) is not None:
+        _watch_parent(args.parent_pid, server.request_stop)
     try:
         print(server.connection_string, flush=True)
         timing = f"lockstep {args.period:g} s" if args.lockstep else "real time"

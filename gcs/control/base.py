@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from gcs.config import AFTER_HORIZON
 from gcs.model import Command, State
 
-__all__ = ["Controller", "Limits", "FiniteHorizonController", "StagedLaw", "steps_to_go", "wrap_angle"]
+__all__ = ["Controller", "Limits", "FiniteHorizonController", "StagedLaw", "steps_to_go", "horizon_mode", "wrap_angle"]
 
 
 @dataclass(frozen=True)
@@ -62,6 +62,16 @@ def steps_to_go(k: int, horizon_steps: int, after: str) -> int | None:
     if after == "pd":
         return None
     raise ValueError(f"after must be one of {AFTER_HORIZON}, got {after!r}")
+
+
+def horizon_mode(k: int, horizon_steps: int | None, after: str | None) -> str:
+    """What flies step k: ``horizon`` within the horizon, then ``terminal`` / ``restart`` /
+    ``fallback_pd`` (per ``after``); ``pd`` for a controller without a horizon (``horizon_steps`` None)."""
+    if horizon_steps is None:
+        return "pd"
+    if k < horizon_steps:
+        return "horizon"
+    return {"pd": "fallback_pd"}.get(after or "", after or "after")
 
 
 class Controller(ABC):

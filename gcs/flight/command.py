@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -12,7 +11,9 @@ from gcs.config import load_config
 from gcs.control import CONTROLLERS
 from gcs.flight.clock import MonotonicClock
 from gcs.flight.embedded import EmbeddedSitl
+from gcs.errors import LogError
 from gcs.flight.fly import EXIT_CODES, Flight, FlightResult, PreflightRefused, _Interrupts
+from gcs.flight.recorder import BYTES_PER_FLIGHT_TICK, FlightRecorder, utc_offset_ns
 from gcs.flight.output import OUTPUTS
 from gcs.link.budget import compute_budget, control_streams, format_budget, suggest_fixes
 from gcs.link.mavlink import LinkError, MavlinkLink, read_signing_key
@@ -20,6 +21,8 @@ from gcs.link.mavlink import LinkError, MavlinkLink, read_signing_key
 __all__ = ["add_fly_parser", "cmd_fly", "DEFAULT_FLY_CONFIG"]
 
 DEFAULT_FLY_CONFIG = "outdoor-circle"
+DEFAULT_RIG_CONFIG = "indoor-4dof"
+RIG_KINDS = ("4dof",)
 
 
 def add_fly_parser(sub, positive_int, positive_float) -> None:
@@ -30,12 +33,17 @@ def add_fly_parser(sub, positive_int, positive_float) -> None:
                     "2 bad config/option, 3 telemetry lost, 4 geofence, 5 interrupted (landed), 6 link error, "
                     "7 preflight refused, 8 immediate LAND (second Ctrl-C), 9 the vehicle left guided control.")
     f.add_argument("--controller", default="nlsoc", choices=CONTROLLERS, help="controller (default nlsoc)")
-    f.add_argument("--config", default=DEFAULT_FLY_CONFIG,
-                   help=f"experiment config, path or bundled name (default {DEFAULT_FLY_CONFIG})")
+    f.add_argument("--config", default=None,
+                   help=f"experiment config, path or bundled name (default {DEFAULT_FLY_CONFIG}; "
+                        f"{DEFAULT_RIG_CONFIG} with --rig)")
+    f.add_argument("--rig", choices=RIG_KINDS, default=None,
+                   help="fly the paper's indoor 4-DOF rig over its XBee serial protocol instead of a MAVLink "
+                        "autopilot (with no --port: the rig emulator)")
     where = f.add_mutually_exclusive_group()
     where.add_argument("--port", metavar="DEVICE", help="serial device of the telemetry radio, e.g. /dev/ttyUSB0")
     where.add_argument("--connect", metavar="URL", help="pymavlink URL: udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT")
-    f.add_argument("--baud", type=positive_int, default=57600, help="serial baud rate (default 57600)")
+    f.add_argument("--baud", type=positive_int, default=None,
+                   help="serial baud rate (default 57600; 115200 with --rig)")
     f.add_argument("--target-system", type=positive_int, default=1, help="vehicle system id (default 1)")
     f.add_argument("--target-component", type=positive_int, default=1, help="vehicle component id (default 1)")
     f.add_argument("--signing-key", metavar="FILE", help="MAVLink 2 signing key file (32 bytes, 64 hex digits or a passphrase)")
@@ -49,7 +57,13 @@ def add_fly_parser(sub, positive_int, positive_float) -> None:
     f.add_argument("--seed", type=int, default=0, help="built-in SITL seed (default 0)")
     f.add_argument("--sitl-arg", action="append", default=[], metavar="ARG",
                    help="extra option for the built-in SITL, repeatable (e.g. --sitl-arg=--wind=2)")
+    f.add_argument("--duration", type=positive_float, metavar="SECONDS",
+                   help="cut the config's mission at this time, then land (e.g. 120 for a short outdoor-altitude)")
     f.add_argument("--summary", metavar="FILE.json", help="write the end-of-flight summary here")
+    g = f.add_mutually_exclusive_group()
+    g.add_argument("--log", metavar="PATH",
+                   help="MCAP flight log (default logs/<UTC time>_<controller>_<experiment>.mcap)")
+    g.add_argument("--no-log", action="store_true", help="write no flight log")
     f.add_argument("--quiet", "-q", action="store_true", help="only warnings, failsafes and the final table")
 
 
@@ -61,9 +75,10 @@ def _print(quiet: bool):
     return out
 
 
-def cmd_fly(args: argparse.Namespace, format_table) -> int:
-    config = load_config(args.config)
-    fc = config.flight
+def _config_for(args: argparse.Namespace):
+    """The config as flown: the file plus the command line's overrides (recorded in its raw
+    document, so the log's config.json is what flew)."""
+    config = load_config(args.config or (DEFAULT_RIG_CONFIG if args.rig else DEFAULT_FLY_CONFIG))
     changes = {}
     if args.telemetry_rate is not None:
         changes["telemetry_rate_hz"] = args.telemetry_rate
@@ -72,8 +87,56 @@ def cmd_fly(args: argparse.Namespace, format_table) -> int:
     if args.output is not None:
         changes["output"] = args.output
     if changes:
-        config = dataclasses.replace(config, flight=dataclasses.replace(fc, **changes))
-        fc = config.flight
+        config = config.with_changes("flight", **changes)
+    if args.duration is not None:
+        config = config.with_duration(args.duration)
+    return config
+
+
+def open_flight_log(args: argparse.Namespace, config, controller_name: str, *, vehicle: str,
+                    extra_metadata: dict | None = None) -> FlightRecorder:
+    """The flight's recorder: checks the log path and the free space before anything flies.
+
+    Raises
+    ------
+    PreflightRefused
+        The log cannot be written there (unwritable directory, full disk).
+    """
+    if getattr(args, "no_log", False):
+        return FlightRecorder(None)
+    from gcs.control import make_controller
+    from gcs.log.cli import default_log_path
+    from gcs.log.flightlog import BackgroundFlightLog
+    from gcs.log.meta import run_attachments, run_metadata
+    from gcs.mission import Mission
+
+    path = Path(args.log) if args.log else default_log_path(controller_name, config.experiment.name)
+    ticks = int(Mission(config.mission).duration_s / config.experiment.ts_s) + 6000  # + preflight and landing
+    try:
+        log = BackgroundFlightLog(path, expected_bytes=ticks * BYTES_PER_FLIGHT_TICK)
+    except LogError as exc:
+        raise PreflightRefused(f"{exc} (--log PATH writes elsewhere, --no-log writes none)") from None
+    rec = FlightRecorder(log)
+    md = dict(extra_metadata or {})
+    md.update(vehicle=vehicle, time_base="vehicle time since boot (lockstep)" if _lockstep(args)
+              else "UTC (the loop's monotonic clock plus a fixed offset)")
+    rec.header(run_metadata(config, [controller_name], source="flight", **md),
+               run_attachments(config, {controller_name: make_controller(controller_name, config)}))
+    return rec
+
+
+def _lockstep(args: argparse.Namespace) -> bool:
+    builtin = args.port is None and args.connect is None
+    return (args.sitl == "lockstep") if builtin else bool(args.lockstep)
+
+
+def cmd_fly(args: argparse.Namespace, format_table) -> int:
+    if args.rig is not None:
+        return _cmd_fly_rig(args, format_table)
+    if args.baud is None:
+        args.baud = 57600
+    config = _config_for(args)
+    fc = config.flight
     key = read_signing_key(args.signing_key) if args.signing_key else None
     console = _print(args.quiet)
     budget_ok = True
@@ -90,11 +153,23 @@ def cmd_fly(args: argparse.Namespace, format_table) -> int:
                 return _finish(args, None, "preflight_refused", config, "link budget exceeded")
             budget_ok = True
             console("[warning] link budget exceeded; flying anyway (--force-budget)")
+    try:
+        recorder = open_flight_log(args, config, args.controller, vehicle="mavlink")
+    except PreflightRefused as exc:
+        return _finish(args, None, "preflight_refused", config, str(exc))
+    try:
+        return _fly_mavlink(args, config, key, console, budget_ok, recorder, format_table)
+    finally:
+        recorder.close()
+        if recorder.path is not None and not args.quiet:
+            print(f"log: {recorder.path}", file=sys.stderr)
+
+
+def _fly_mavlink(args, config, key, console, budget_ok, recorder, format_table) -> int:
     sitl = None
-    lockstep = args.lockstep
+    lockstep = _lockstep(args)
     try:
         if args.port is None and args.connect is None:
-            lockstep = args.sitl == "lockstep"
             link = MavlinkLink("udpin:127.0.0.1:0", target_system=args.target_system,
                                target_component=args.target_component, signing_key=key)
             port = link.conn.port.getsockname()[1]
@@ -107,22 +182,26 @@ def cmd_fly(args: argparse.Namespace, format_table) -> int:
                                target_component=args.target_component, signing_key=key)
     except LinkError as exc:
         print(f"gcs: error: {exc}", file=sys.stderr)
+        recorder.event(0, "failsafe", f"link error: {exc}")
         return _finish(args, None, "link_error", config, str(exc))
     interrupts = _Interrupts()
+    clock = None if lockstep else MonotonicClock()
+    if clock is not None:
+        recorder.offset_ns = utc_offset_ns(clock.now_ns())
     try:
         with interrupts:
-            flight = Flight(config, args.controller, link, None if lockstep else MonotonicClock(), console=console,
-                            interrupts=interrupts)
+            flight = Flight(config, args.controller, link, clock, console=console, interrupts=interrupts,
+                            recorder=recorder)
             try:
                 flight.preflight(budget_ok)
             except PreflightRefused as exc:
-                console(f"[failsafe] preflight refused: {exc}")
+                flight.event("failsafe", f"preflight refused: {exc}")
                 flight.restore_params()
                 return _finish(args, None, "preflight_refused", config, str(exc), flight.events)
             except LinkError as exc:
                 if sitl is not None:
                     sitl.check_alive()
-                console(f"[failsafe] link error: {exc}")
+                flight.event("failsafe", f"link error: {exc}")
                 return _finish(args, None, "link_error", config, str(exc), flight.events)
             result = flight.fly()
             flight.restore_params()
@@ -130,14 +209,97 @@ def cmd_fly(args: argparse.Namespace, format_table) -> int:
         link.close()
         if sitl is not None:
             sitl.stop()
+    return _report(args, result, config, format_table)
+
+
+def _cmd_fly_rig(args: argparse.Namespace, format_table) -> int:
+    """``gcs fly --rig 4dof``: the rig on ``--port`` at ``--baud`` (115200), or its emulator."""
+    from gcs.errors import ConfigError
+    from gcs.flight.embedded import EmbeddedRig
+    from gcs.flight.rig import RigFlight
+    from gcs.link.rig import RigLink, rig_link_budget
+
+    for flag, given in (("--connect", args.connect), ("--signing-key", args.signing_key), ("--output", args.output),
+                        ("--lockstep", args.lockstep or None)):
+        if given is not None:
+            raise ConfigError(flag, "", "not used with --rig (the rig takes CONTROL frames on a serial port: --port)")
+    baud = args.baud if args.baud is not None else 115200
+    config = _config_for(args)
+    console = _print(args.quiet)
+    if args.port is not None:
+        b = rig_link_budget(baud, 1.0 / config.experiment.ts_s)
+        share = max(b["down_share"], b["up_share"])
+        if share > 0.8:
+            print(f"rig link at {baud} baud: telemetry {b['down_b_s']:.0f} B/s ({b['down_share']:.0%}), control "
+                  f"{b['up_b_s']:.0f} B/s ({b['up_share']:.0%}) of {b['capacity_b_s']:.0f} B/s; 115200 baud fits",
+                  file=sys.stderr)
+            if not args.force_budget:
+                print("refusing to fly (--force-budget overrides)", file=sys.stderr)
+                return _finish(args, None, "preflight_refused", config, "link budget exceeded")
+            console("[warning] link budget exceeded; flying anyway (--force-budget)")
+    try:
+        recorder = open_flight_log(args, config, args.controller, vehicle=f"rig {args.rig}")
+    except PreflightRefused as exc:
+        return _finish(args, None, "preflight_refused", config, str(exc))
+    rig = None
+    lockstep = args.port is None and args.sitl == "lockstep"
+    try:
+        try:
+            if args.port is None:
+                # Lockstep runs without the emulated baud limit (as fast as it computes) unless asked.
+                rig = EmbeddedRig(lockstep=lockstep, seed=args.seed, baud=0 if lockstep else baud,
+                                  extra_args=args.sitl_arg).start()
+                console(f"[link] rig emulator ({'lockstep' if lockstep else 'real time'}) on {rig.device}")
+                port = rig.device
+            else:
+                port = args.port
+            link = RigLink(port, baud)
+        except LinkError as exc:
+            print(f"gcs: error: {exc}", file=sys.stderr)
+            if rig is not None:
+                rig.stop()
+            return _finish(args, None, "link_error", config, str(exc))
+        interrupts = _Interrupts()
+        clock = None if lockstep else MonotonicClock()
+        if clock is not None:
+            recorder.offset_ns = utc_offset_ns(clock.now_ns())
+        try:
+            with interrupts:
+                flight = RigFlight(config, args.controller, link, clock, console=console, interrupts=interrupts,
+                                   recorder=recorder)
+                try:
+                    flight.preflight()
+                except PreflightRefused as exc:
+                    flight.event("failsafe", f"preflight refused: {exc}")
+                    return _finish(args, None, "preflight_refused", config, str(exc), flight.events)
+                except LinkError as exc:
+                    if rig is not None:
+                        rig.check_alive()
+                    flight.event("failsafe", f"link error: {exc}")
+                    return _finish(args, None, "link_error", config, str(exc), flight.events)
+                result = flight.fly()
+        finally:
+            link.close()
+            if rig is not None:
+                rig.stop()
+        return _report(args, result, config, format_table)
+    finally:
+        recorder.close()
+        if recorder.path is not None and not args.quiet:
+            print(f"log: {recorder.path}", file=sys.stderr)
+
+
+def _report(args, result: FlightResult, config, format_table) -> int:
     if result.metrics:
         table = {"results": {result.controller: {k: {"mean": v, "std": 0.0} for k, v in result.metrics.items()}}}
         print(format_table(table, f"{config.experiment.name}: {result.controller}, {result.duration_s:.2f} s flown, "
                                   f"exit {result.exit_reason}"))
     lp = result.loop
+    ln = result.link
     print(f"loop: {lp['ticks']} ticks, {lp['deadline_misses']} deadline misses, jitter p99 {lp['jitter_p99_ms']:.3f} ms, "
-          f"tick p99 {lp['tick_p99_ms']:.3f} ms; link: {result.link['received']} in, {result.link['sent']} out, "
-          f"{result.link['bad_data']} bad, {result.link['other_system']} from other systems")
+          f"tick p99 {lp['tick_p99_ms']:.3f} ms (logging p50 {lp.get('log_p50_ms', 0.0) * 1000:.0f} us); "
+          f"link: {ln.get('received', 0)} in, {ln.get('sent', 0)} out, {ln.get('bad_data', 0)} bad"
+          + (f", {ln['other_system']} from other systems" if "other_system" in ln else ""))
     return _finish(args, result, result.exit_reason, config)
 
 

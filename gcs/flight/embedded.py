@@ -16,7 +16,7 @@ from typing import Sequence
 
 from gcs.link.mavlink import LinkError as GcsError  # a dead simulator is a link failure (exit 6)
 
-__all__ = ["EmbeddedSitl"]
+__all__ = ["EmbeddedSitl", "EmbeddedRig"]
 
 
 class EmbeddedSitl:
@@ -34,7 +34,7 @@ class EmbeddedSitl:
 
     def __init__(self, gcs_port: int, *, lockstep: bool, seed: int = 0, extra_args: Sequence[str] = ()) -> None:
         self.args = [sys.executable, "-m", "sitl.cli", "--udp", f"127.0.0.1:{gcs_port}", "--seed", str(seed),
-                     *(["--lockstep"] if lockstep else []), *extra_args]
+                     "--parent-pid", str(os.getpid()), *(["--lockstep"] if lockstep else []), *extra_args]
         self.proc: subprocess.Popen | None = None
 
     def start(self) -> "EmbeddedSitl":
@@ -69,3 +69,48 @@ class EmbeddedSitl:
 
     def __exit__(self, *exc) -> None:
         self.stop()
+
+
+class EmbeddedRig(EmbeddedSitl):
+    """The 4-DOF rig emulator (``sitl --rig 4dof``) as a child process on a pseudo-terminal.
+
+    Parameters
+    ----------
+    lockstep : bool
+    seed : int
+    baud : int
+        Byte-rate limit of the emulated serial line (115200 as the paper's XBee; 0 = none, what
+        lockstep uses by default so that it runs faster than real time).
+    extra_args : sequence of str
+        More ``sitl`` options (``--bit-error-rate``, ``--loss``, ...), after the defaults.
+
+    :attr:`device` is the serial device to open once :meth:`start` returned.
+    """
+
+    def __init__(self, *, lockstep: bool, seed: int = 0, baud: int = 115200, extra_args: Sequence[str] = (),
+                 start_timeout_s: float = 10.0) -> None:
+        self.args = [sys.executable, "-m", "sitl.cli", "--rig", "4dof", "--seed", str(seed), "--baud", str(baud),
+                     "--parent-pid", str(os.getpid()), *(["--lockstep"] if lockstep else []), *extra_args]
+        self.proc = None
+        self.device: str | None = None
+        self.start_timeout_s = start_timeout_s
+
+    def start(self) -> "EmbeddedRig":
+        import selectors
+
+        try:
+            self.proc = subprocess.Popen(self.args, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                         stderr=subprocess.PIPE, start_new_session=True)
+        except OSError as exc:
+            raise GcsError(f"cannot start the rig emulator: {exc}") from None
+        sel = selectors.DefaultSelector()
+        sel.register(self.proc.stdout, selectors.EVENT_READ)  # type: ignore[arg-type]
+        ready = sel.select(self.start_timeout_s)
+        sel.close()
+        line = self.proc.stdout.readline().decode(errors="replace").strip() if ready else ""  # type: ignore[union-attr]
+        if not line.startswith("/dev/"):
+            self.check_alive()
+            self.stop()
+            raise GcsError(f"the rig emulator did not report its serial device within {self.start_timeout_s:g} s")
+        self.device = line
+        return self

@@ -1,4 +1,4 @@
-"""``gcs fly``: preflight, arming, the 100 Hz mission loop, landing and failsafes.
+"""``gcs fly`` on a MAVLink autopilot: preflight, arming, the mission loop, LAND and failsafes.
 
 Sequence::
 
@@ -6,150 +6,40 @@ Sequence::
     ATC_ANG_*_P) -> telemetry fresh, battery -> GUIDED_NOGPS -> setpoints streamed
     -> arm -> mission phases at 100 Hz -> LAND -> disarmed
 
-Each tick (absolute deadlines on the injected clock, so no drift): drain all
-telemetry, predict and correct the estimate, reference from the mission,
-controller step, safety envelope, output adapter, send.  In lockstep the same
-loop runs on :class:`VehicleClock`, whose time is the vehicle's own.
-
-Failsafes and exit codes (also in the summary as ``exit_reason``):
-
-====  =================  ==========================================================
-code  exit_reason        what happened
-====  =================  ==========================================================
-0     completed          mission flown, landed, disarmed
-3     telemetry_lost     telemetry older than ``telemetry_stale_s``: LAND, level setpoints
-4     geofence           geofence or ceiling breached: LAND
-5     interrupted        Ctrl-C / SIGTERM: controlled descent, LAND, disarmed
-6     link_error         no heartbeat, port cannot be opened, link failed before flight
-7     preflight_refused  link budget, stale telemetry, battery, mode or arming refused
-8     immediate_land     a second Ctrl-C: LAND at once
-9     vehicle_took_over  the vehicle disarmed or left GUIDED(_NOGPS) (pilot, onboard
-                         failsafe): setpoints stop, the vehicle is left to its mode
-====  =================  ==========================================================
+The mission loop, the failsafes and the exit codes are :class:`gcs.flight.loop.FlightLoop`'s;
+this module is the MAVLink vehicle: the link, telemetry, output adapters, the preflight
+and the landing.  Every frame both ways goes to the flight log (``recorder``).
 """
 
 from __future__ import annotations
 
-import math
-import signal
-import threading
 import time
-from dataclasses import dataclass, field
 from typing import Callable
 
-import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from gcs.config import Config, PhaseConfig
-from gcs.control import FiniteHorizonController, make_controller, model_params
-from gcs.errors import GcsError
+import numpy as np
+
+from gcs.config import Config
+from gcs.control import model_params
 from gcs.estimate import StateEstimator
 from gcs.flight.clock import Clock
+from gcs.flight.loop import (EXIT_CODES, FlightLoop, FlightResult, Interrupts, PreflightRefused,  # noqa: F401
+                             VehicleClock)
 from gcs.flight.output import OutputAdapter, OutputModel
-from gcs.flight.safety import EnvelopeLimits, SafetyEnvelope
-from gcs.flight.stats import LoopStats
+from gcs.flight.recorder import FlightRecorder
 from gcs.flight.telemetry import Telemetry
 from gcs.link.mavlink import LinkError, MavlinkLink
-from gcs.metrics import FlightRecord, controller_cost, flight_metrics
-from gcs.mission import Mission
 from gcs.model import Command, State
 
 __all__ = ["Flight", "FlightResult", "VehicleClock", "EXIT_CODES", "PreflightRefused"]
 
-EXIT_CODES = {"completed": 0, "telemetry_lost": 3, "geofence": 4, "interrupted": 5, "link_error": 6,
-              "preflight_refused": 7, "immediate_land": 8, "vehicle_took_over": 9}
+#: Kept for callers of the earlier name.
+_Interrupts = Interrupts
 
 
-class PreflightRefused(GcsError):
-    """A preflight check failed; the vehicle was not armed."""
-
-    exit_code = 7
-
-
-@dataclass
-class FlightResult:
-    """End-of-flight summary (see :meth:`to_json`)."""
-
-    controller: str
-    config: str
-    exit_reason: str
-    duration_s: float
-    metrics: dict
-    loop: dict
-    events: list = field(default_factory=list)
-    link: dict = field(default_factory=dict)
-    record: FlightRecord | None = None
-
-    @property
-    def exit_code(self) -> int:
-        return EXIT_CODES[self.exit_reason]
-
-    def to_json(self) -> dict:
-        return {"controller": self.controller, "config": self.config, "exit_reason": self.exit_reason,
-                "exit_code": self.exit_code, "duration_s": self.duration_s, "metrics": self.metrics,
-                "loop": self.loop, "events": self.events, "link": self.link}
-
-
-class VehicleClock:
-    """Lockstep clock: the vehicle's time (``time_boot_ms`` of its telemetry).
-
-    ``sleep_until_ns`` pumps the link until telemetry stamped at or after the
-    deadline has arrived; if none comes within ``max_wait_s`` of wall time the
-    clock moves to the deadline anyway, so a silent vehicle still ages the
-    telemetry and trips the failsafe.
-    """
-
-    def __init__(self, telemetry: Telemetry, pump: Callable[[float], None], max_wait_s: float = 0.05) -> None:
-        self.telemetry = telemetry
-        self.pump = pump
-        self.max_wait_s = max_wait_s
-        self._virtual_ns = 0
-        self.timeouts = 0
-
-    def now_ns(self) -> int:
-        return max(self.telemetry.status.time_boot_ms * 1_000_000, self._virtual_ns)
-
-    def mark_sent(self) -> None:
-        """A command went out: the next tick waits for telemetry newer than now."""
-        self._sent_ms = self.telemetry.status.time_boot_ms
-
-    def sleep_until_ns(self, deadline_ns: int) -> None:
-        # The vehicle steps once per command: wait for the telemetry of that step (newer than
-        # when the command left), not for an absolute time a lost frame would never reach.
-        sent = getattr(self, "_sent_ms", None)
-        end = time.monotonic() + self.max_wait_s
-        while (self.telemetry.status.time_boot_ms <= sent) if sent is not None else (self.now_ns() < deadline_ns):
-            remaining = end - time.monotonic()
-            if remaining <= 0:
-                self.timeouts += 1
-                break
-            self.pump(min(remaining, 0.005))
-        self._virtual_ns = max(self._virtual_ns, deadline_ns)
-
-
-class _Interrupts:
-    """SIGINT/SIGTERM -> flags (first: controlled landing, second: immediate LAND)."""
-
-    def __init__(self) -> None:
-        self.count = 0
-        self._old: dict = {}
-
-    def __enter__(self) -> "_Interrupts":
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                self._old[sig] = signal.signal(sig, self._handle)
-        return self
-
-    def _handle(self, signum, frame) -> None:
-        self.count += 1
-
-    def __exit__(self, *exc) -> None:
-        for sig, old in self._old.items():
-            signal.signal(sig, old)
-
-
-class Flight:
-    """One flight of ``controller`` on ``config``'s mission over ``link``.
+class Flight(FlightLoop):
+    """One flight of ``controller`` on ``config``'s mission over a MAVLink ``link``.
 
     Parameters
     ----------
@@ -158,53 +48,43 @@ class Flight:
     link : MavlinkLink
     clock : Clock or None
         The loop's clock in real time (None = lockstep on :class:`VehicleClock`).
+    output : str or None
+        Setpoint message (default: the config's ``[flight] output``).
     console : callable (str) or None
         Where the pilot's lines go.
     live_period_s : float
         Period of the live altitude/error line.
+    recorder : FlightRecorder or None
+        The flight log; every MAVLink frame both ways is logged.
     """
+
+    control_name = "guided control"
 
     def __init__(self, config: Config, controller: str, link: MavlinkLink, clock: Clock | None, *,
                  output: str | None = None, console: Callable[[str], None] | None = None,
-                 live_period_s: float = 0.5, interrupts: _Interrupts | None = None) -> None:
-        self.config = config
-        self.controller_name = controller
-        self.link = link
-        self.flight_cfg = config.flight
-        self.output_kind = output or config.flight.output
-        self.console = console or (lambda s: None)
-        self.live_period_s = live_period_s
-        self.events: list[dict] = []
-        self.interrupts = interrupts or _Interrupts()
-        e = config.experiment
-        self.ts_ns = int(round(e.ts_s * 1e9))
-        self.model = model_params(config)
+                 live_period_s: float = 0.5, interrupts: Interrupts | None = None,
+                 recorder: FlightRecorder | None = None) -> None:
         fc = config.flight
-        self.estimator = StateEstimator(e.ts_s, self.model, (fc.position_std_m,) * 3, config.estimator.accel_noise_std_m_s2,
-                                        ground_z_m=None)
-        self.telemetry = Telemetry(self.estimator, (fc.position_std_m ** 2,) * 3, (fc.velocity_std_m_s ** 2,) * 3,
+        estimator = StateEstimator(config.experiment.ts_s, model_params(config), (fc.position_std_m,) * 3,
+                                   config.estimator.accel_noise_std_m_s2, ground_z_m=None)
+        super().__init__(config, controller, estimator, clock, console=console, live_period_s=live_period_s,
+                         interrupts=interrupts, recorder=recorder)
+        self.link = link
+        self.output_kind = output or fc.output
+        self.telemetry = Telemetry(estimator, (fc.position_std_m ** 2,) * 3, (fc.velocity_std_m_s ** 2,) * 3,
                                    on_event=self._vehicle_event, target_component=link.target_component)
         self._restore: dict[str, float] = {}
         self._link_down = False
-        self.lockstep = clock is None
-        self.clock: Clock = clock if clock is not None else VehicleClock(self.telemetry, self._pump_wait)
-        self.stats = LoopStats(self.ts_ns)
-        self.envelope = SafetyEnvelope(EnvelopeLimits(
-            max_thrust_n=config.vehicle.max_thrust_n, max_angular_accel_rad_s2=config.vehicle.max_angular_accel_rad_s2,
-            max_tilt_rad=math.radians(fc.max_tilt_deg), fence_half_width_m=fc.fence_half_width_m,
-            ceiling_m=fc.ceiling_m, level_kp=config.pd.kp_phi, level_kd=config.pd.kd_phi))
-        self.controller = make_controller(controller, config)
+        if clock is None:
+            self.clock = VehicleClock(lambda: self.telemetry.status.time_boot_ms * 1_000_000, self._pump_wait)
+        if self.recorder.enabled:
+            rec = self.recorder
+            link.on_frame = lambda direction, msg, accepted=True: rec.mavlink(self.clock.now_ns(), direction, msg,
+                                                                              accepted)
         self.adapter: OutputAdapter | None = None
-        self._last_cmd: Command | None = None
         self._last_rx_wall = time.monotonic()
-        self._limit_flags_seen: set[str] = set()
 
     # ------------------------------------------------------------------ events and I/O
-    def event(self, kind: str, text: str) -> None:
-        """Record and print an event."""
-        self.events.append({"t_ns": self.clock.now_ns(), "kind": kind, "text": text})
-        self.console(f"[{kind}] {text}")
-
     def _vehicle_event(self, kind: str, text: str) -> None:
         self.event(kind, text)
 
@@ -422,154 +302,46 @@ class Flight:
         if not self._wait_for("armed", lambda: self.telemetry.status.armed, 3.0):
             raise PreflightRefused("the vehicle acknowledged arming but does not report armed")
 
-    # ------------------------------------------------------------------ flight
-    def _landing_mission(self, from_z: float) -> Mission:
-        duration = max(from_z / self.flight_cfg.landing_speed_m_s, self.config.experiment.ts_s)
-        s = self.estimator.state()
-        return Mission([PhaseConfig("takeoff", self.config.experiment.ts_s, z_m=max(from_z, 1e-3)),
-                        PhaseConfig("land", duration)], start=(s.x, s.y, max(from_z, 1e-3)))
+    # ------------------------------------------------------------------ the loop's hooks
+    def _fresh(self, now_ns: int, stale_s: float) -> bool:
+        return self.telemetry.fresh(now_ns, stale_s)
 
-    def fly(self) -> FlightResult:
-        """Preflight must have passed.  Flies the mission and lands; returns the summary."""
-        e = self.config.experiment
-        mission = Mission(self.config.mission, zero_velocity=e.zero_velocity_reference)
-        override: Mission | None = None
-        override_k0 = 0
-        horizon = self.controller if isinstance(self.controller, FiniteHorizonController) else None
-        states, refs, cmds, js = [], [], [], []
-        stale_s = self.flight_cfg.telemetry_stale_s
-        reason = "completed"
-        ts_ns = self.ts_ns
-        t0 = self.clock.now_ns()
-        # The mission is flown relative to where the vehicle stands at its start (the local
-        # origin of a real autopilot need not be the takeoff point).
-        start = self.estimator.state()
-        origin = (start.x, start.y, start.z)
-        self.envelope.origin = origin
-        self.event("phase", f"takeoff point (x {origin[0]:.2f}, y {origin[1]:.2f}, z {origin[2]:.2f}) m")
-        next_live = 0.0
-        phase_idx = -1
-        k = 0
-        handled_interrupts = 0
-        self.event("phase", f"mission start: {len(self.config.mission)} phases, {mission.duration_s:g} s")
-        wall0 = time.perf_counter()
-        while True:
-            deadline = t0 + k * ts_ns
-            self.clock.sleep_until_ns(deadline)
-            wake = self.clock.now_ns()
-            late = wake - deadline
-            if late >= ts_ns and not self.lockstep:
-                skip = late // ts_ns
-                self.stats.skipped_ticks += int(skip)
-            c0 = time.perf_counter_ns()
-            self._pump()
-            c1 = time.perf_counter_ns()
-            self.estimator.predict(e.ts_s, self._last_cmd)
-            state = self.estimator.state()
-            c2 = time.perf_counter_ns()
-            t = k * e.ts_s
-            # --- failsafes and interrupts
-            if not self.telemetry.fresh(wake, stale_s):
-                reason = "telemetry_lost"
-                self.event("failsafe", f"telemetry stale for more than {stale_s:g} s at t = {t:.2f} s: LAND")
-                break
-            breach = self.envelope.breaches(state)
-            if breach:
-                reason = "geofence"
-                self.event("failsafe", f"{', '.join(sorted(breach))} breached at t = {t:.2f} s "
-                                       f"(x {state.x:.2f}, y {state.y:.2f}, z {state.z:.2f} m): LAND")
-                break
-            st = self.telemetry.status
-            if not st.armed or st.custom_mode not in (20, 4):
-                reason = "vehicle_took_over"
-                self.event("failsafe", f"the vehicle left guided control at t = {t:.2f} s "
-                                       f"({'disarmed' if not st.armed else 'mode ' + st.mode}): stopping setpoints")
-                break
-            if self.interrupts.count > handled_interrupts:
-                handled_interrupts = self.interrupts.count
-                if handled_interrupts >= 2:
-                    reason = "immediate_land"
-                    self.event("failsafe", "second interrupt: LAND now")
-                    break
-                reason = "interrupted"
-                override = self._landing_mission(state.z)
-                override_k0 = k
-                self.event("interrupt", f"interrupted at t = {t:.2f} s: controlled descent from z = {state.z:.2f} m "
-                                        f"at {self.flight_cfg.landing_speed_m_s:g} m/s")
-            if override is not None:
-                tm = (k - override_k0) * e.ts_s
-                if tm >= override.duration_s:
-                    break
-                ref = override.reference(tm)  # built from the estimate: already absolute
-            else:
-                if t >= mission.duration_s:
-                    break
-                seg = mission.segment_at(t)
-                if seg is not None and seg.index != phase_idx:
-                    phase_idx = seg.index
-                    self.event("phase", f"{seg.phase.kind} ({seg.phase.duration_s:g} s) at t = {t:.2f} s")
-                r = mission.reference(t)
-                ref = r._replace(x=r.x + origin[0], y=r.y + origin[1], z=r.z + origin[2])
-            # --- control, envelope, output
-            raw = self.controller.step(k, state, ref)
-            cmd, flags = self.envelope.apply(state, raw)
-            for f in flags - self._limit_flags_seen:
-                self.event("warning", f"{f} limit acting at t = {t:.2f} s")
-            self._limit_flags_seen |= flags
-            c3 = time.perf_counter_ns()
-            fields = self.adapter.fields(state, cmd)  # type: ignore[union-attr]
-            self._send(self.adapter.encode(fields, self.telemetry.status.time_boot_ms))  # type: ignore[union-attr]
-            if isinstance(self.clock, VehicleClock):
-                self.clock.mark_sent()
-            c4 = time.perf_counter_ns()
-            self.stats.record(late, {"decode": c1 - c0, "estimate": c2 - c1, "control": c3 - c2, "send": c4 - c3})
-            self._last_cmd = cmd
-            states.append(state)
-            refs.append(ref)
-            cmds.append(cmd)
-            js.append((horizon.last_steps_to_go or 0) if horizon is not None else 0)
-            if k % 100 == 0:  # once a second: the ground station is alive, and how late is the link
-                try:
-                    self.link.send_heartbeat()
-                    self.telemetry.timesync_sent.add(self.link.send_timesync())
-                except LinkError as exc:
-                    self._link_failed(exc)
-            if t >= next_live:
-                next_live = t + self.live_period_s
-                self.console(f"t {t:7.2f} s  z {state.z:6.3f} m  ref {ref.z:6.3f} m  err {ref.z - state.z:+.3f} m  "
-                             f"xy ({state.x:+.2f}, {state.y:+.2f}) m  thrust {cmd.thrust_n:5.2f} N")
-            k += 1
-            if not self.lockstep and late >= ts_ns:
-                k += int(late // ts_ns)
-        wall_s = time.perf_counter() - wall0
-        end_state = self.estimator.state()
+    def _control_lost(self, t_s: float) -> str | None:
+        st = self.telemetry.status
+        if not st.armed:
+            return "disarmed"
+        if st.custom_mode not in (20, 4):
+            return f"mode {st.mode}"
+        return None
+
+    def _send_command(self, state: State, cmd: Command) -> None:
+        fields = self.adapter.fields(state, cmd)  # type: ignore[union-attr]
+        self._send(self.adapter.encode(fields, self.telemetry.status.time_boot_ms))  # type: ignore[union-attr]
+
+    def _housekeeping(self, k: int) -> None:
+        try:
+            self.link.send_heartbeat()
+            self.telemetry.timesync_sent.add(self.link.send_timesync())
+        except LinkError as exc:
+            self._link_failed(exc)
+
+    def _finish(self, reason: str) -> None:
         if reason == "vehicle_took_over":
             self._wait_for("disarm", lambda: not self.telemetry.status.armed, self.flight_cfg.land_timeout_s,
                            send=False)
         else:
             self._land(reason)
-        record = None
-        metrics: dict = {}
-        if cmds:
-            states.append(end_state)
-            refs.append(refs[-1])
-            record = FlightRecord(e.ts_s, np.array(states, float), np.array(refs, float), np.array(cmds, float),
-                                  np.array(js, dtype=np.int64))
-            metrics = flight_metrics(record, self.config, mission, controller_cost(self.controller_name, self.config))
+
+    def _link_summary(self) -> dict:
         c = self.link.counters
-        loop = self.stats.summary()
-        loop["wall_s"] = wall_s
-        loop["realtime_ratio"] = len(cmds) * e.ts_s / wall_s if wall_s > 0 else 0.0
-        if isinstance(self.clock, VehicleClock):
-            loop["telemetry_timeouts"] = self.clock.timeouts
-        return FlightResult(self.controller_name, self.config.source, reason, len(cmds) * e.ts_s, metrics,
-                            loop, self.events,
-                            {"received": c.received, "sent": c.sent, "bad_data": c.bad_data,
-                             "other_system": c.other_system, "unsigned_rejected": c.unsigned_rejected,
-                             "timesync_rtt_ms": self.telemetry.timesync_rtt_ms,
-                             "timesync_rtt_median_ms": (float(np.median(self.telemetry.timesync_samples_ms))
-                                                        if self.telemetry.timesync_samples_ms else None)},
-                            record)
+        samples = self.telemetry.timesync_samples_ms
+        return {"received": c.received, "sent": c.sent, "bad_data": c.bad_data, "other_system": c.other_system,
+                "unsigned_rejected": c.unsigned_rejected, "timesync_rtt_ms": self.telemetry.timesync_rtt_ms,
+                "timesync_rtt_median_ms": float(np.median(samples)) if samples else None}
+
+    def fly(self) -> FlightResult:
+        """Preflight must have passed.  Flies the mission and lands; returns the summary."""
+        return self.run_mission()
 
     def _land(self, reason: str) -> None:
         """LAND mode, level setpoints while waiting, until disarmed (or the timeout).

@@ -82,3 +82,16 @@ class SafetyEnvelope:
                 flags.add("torque")
         flags |= self.breaches(state)
         return Command(thrust, acc[0], acc[1], acc[2]), frozenset(flags)
+
+    def level(self, state: State, thrust_n: float) -> Command:
+        """A levelling command at ``thrust_n`` (roll and pitch PD to zero; yaw rate damped), within the limits.
+
+        For vehicles that take thrust and angular accelerations (the rig) when no controller flies.
+        """
+        lim = self.limits
+        a = lim.max_angular_accel_rad_s2
+        clip = lambda v: a if v > a else -a if v < -a else v
+        return Command(min(max(thrust_n, 0.0), lim.max_thrust_n),
+                       clip(-lim.level_kp * state.roll - lim.level_kd * state.roll_rate),
+                       clip(-lim.level_kp * state.pitch - lim.level_kd * state.pitch_rate),
+                       clip(-lim.level_kd * state.yaw_rate))

@@ -9,7 +9,7 @@ import numpy as np
 __all__ = ["LoopStats", "STAGES"]
 
 #: The stages of one tick, in order.
-STAGES = ("decode", "estimate", "control", "send")
+STAGES = ("decode", "estimate", "control", "send", "log")
 
 
 @dataclass
@@ -34,7 +34,7 @@ class LoopStats:
         self.jitter_ns.append(jitter_ns)
         self.tick_ns.append(sum(stages_ns.values()))
         for k, v in stages_ns.items():
-            self.stage_ns[k].append(v)
+            self.stage_ns.setdefault(k, []).append(v)
         if jitter_ns >= self.period_ns:
             self.deadline_misses += 1
 

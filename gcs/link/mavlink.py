@@ -83,8 +83,9 @@ class MavlinkLink:
         32-byte MAVLink 2 signing key; outgoing frames are signed and unsigned
         incoming frames rejected (except RADIO_STATUS, which SiK radios inject).
     on_frame : callable or None
-        Called with ``(direction, msg)`` for every frame received ("in") and sent
-        ("out"), e.g. for logging.
+        Called with ``(direction, msg, accepted)`` for every frame received ("in") and
+        sent ("out"), e.g. for logging; ``accepted`` is False for frames that were
+        dropped (garbled bytes as pymavlink's BAD_DATA, other systems).
     """
 
     def __init__(self, url: str, *, baud: int = 57600, target_system: int = 1, target_component: int = 1,
@@ -147,9 +148,13 @@ class MavlinkLink:
         t = msg.get_type()
         if t == "BAD_DATA":
             c.bad_data += 1
+            if self.on_frame is not None:
+                self.on_frame("in", msg, False)
             return False
         if msg.get_srcSystem() != self.target_system:
             c.other_system += 1
+            if self.on_frame is not None:
+                self.on_frame("in", msg, False)
             return False
         if self.vehicle_addr is None and self._last_addr is not None:
             self.vehicle_addr = self._last_addr
@@ -159,7 +164,7 @@ class MavlinkLink:
         if t == "HEARTBEAT" and msg.get_srcComponent() == self.target_component:
             self.last_heartbeat = msg
         if self.on_frame is not None:
-            self.on_frame("in", msg)
+            self.on_frame("in", msg, True)
         return True
 
     def drain(self) -> list:
@@ -218,7 +223,7 @@ class MavlinkLink:
             raise LinkError(f"link {self.url!r} failed: {exc}") from None
         self.counters.sent += 1
         if self.on_frame is not None:
-            self.on_frame("out", msg)
+            self.on_frame("out", msg, True)
 
     def send_heartbeat(self) -> None:
         self.send(self.mav.heartbeat_encode(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0))

@@ -41,6 +41,9 @@ Topics (paper frame: x north, y east, z **up**; SI units; field names in the sch
     plus the state after the last command (what ``gcs sim`` computes its metrics on).
 ``/sim/metrics``
     Simulation only: the metrics ``gcs sim`` computed in the run, with ``flight``.
+``/flight/metrics``
+    Flight only: the metrics ``gcs fly`` computed at the end of the flight (on the estimate and
+    the limited commands), which ``gcs log metrics`` reproduces exactly.
 ``/loop/timing``
     Flight only: ``k``, ``jitter_s``, ``tick_s``, ``deadline_missed`` and per-stage ``*_s``.
 ``/events``
@@ -51,7 +54,11 @@ Topics (paper frame: x north, y east, z **up**; SI units; field names in the sch
     Decoded MAVLink messages received / sent (pymavlink field names and units).
 ``/mavlink/raw``
     Every raw frame both ways: ``dir`` (``in`` | ``out``), ``type`` and ``data_b64`` (the frame
-    bytes, base64), in order, for replay.
+    bytes, base64), in order, for replay; frames of other systems (``type`` ``DROPPED`` when they
+    did not decode) and garbled bytes (``BAD_DATA``) too.
+``/rig/in/<NAME>``, ``/rig/out/<NAME>``, ``/rig/raw``
+    The same for the 4-DOF rig's serial protocol (docs/rig-protocol.md): decoded messages and
+    the escaped frames as on the wire; bytes that held no frame are ``GARBAGE``.
 
 Metadata record ``flight``: controller(s), experiment, config (path), software_version
 (``gcs.__version__``), start_time_utc, command line, and for simulations runs, seed, duration,
@@ -65,7 +72,11 @@ the other on the file's time line (1 s apart), each announced on ``/flight``; ``
 recomputes every flight's metrics from ``/sim/truth``, ``/control/reference``,
 ``/control/command`` and the attached config, equal to the figures ``gcs sim`` printed.
 
-Writing from a flight loop (one :class:`FlightLog` per flight, times from the loop's clock)::
+``gcs fly`` does not write from its control loop: :mod:`gcs.log.flightlog` hands compact
+records to a writer process (see there); times are the loop's clock — the vehicle's time since
+boot in lockstep, UTC (the monotonic clock plus a fixed offset) in real time.
+
+Writing a log directly (one :class:`FlightLog` per flight, times from the loop's clock)::
 
     check_writable(path, expected_bytes)               # pre-flight: directory, free space
     with FlightLog(path) as log:                       # finished on exit, also on exceptions
@@ -84,7 +95,8 @@ Writing from a flight loop (one :class:`FlightLog` per flight, times from the lo
 
 Modules: :mod:`~gcs.log.writer` (:class:`FlightLog`, :func:`check_writable`),
 :mod:`~gcs.log.reader` (:func:`read_log`), :mod:`~gcs.log.topics` (names, fields, schemas),
-:mod:`~gcs.log.meta` (metadata, config and gains attachments), :mod:`~gcs.log.simlog`
+:mod:`~gcs.log.meta` (metadata, config and gains attachments), :mod:`~gcs.log.flightlog`
+(logging ``gcs fly`` flights through a writer process), :mod:`~gcs.log.simlog`
 (logging simulated flights, in this process or in the :mod:`~gcs.log.worker` process),
 :mod:`~gcs.log.flights` (flights and metrics from a log), :mod:`~gcs.log.review` (info,
 metrics, compare, export), :mod:`~gcs.log.plot` (figures), :mod:`~gcs.log.cli` (the ``gcs log``

@@ -33,7 +33,7 @@ __all__ = ["LoggedFlight", "split_flights", "flight_slice", "flight_arrays", "fl
            "log_config", "logged_metrics", "stream_metrics", "METRIC_TOPICS"]
 
 #: Topics :func:`logged_metrics` needs.
-METRIC_TOPICS = (T.FLIGHT, T.TRUTH, T.STATE, T.REFERENCE, T.COMMAND, T.COMMAND_LIMITED, T.HORIZON, T.SIM_METRICS)
+METRIC_TOPICS = (T.FLIGHT, T.TRUTH, T.STATE, T.REFERENCE, T.COMMAND, T.COMMAND_LIMITED, T.HORIZON, *T.RUN_METRICS)
 
 
 @dataclass
@@ -143,8 +143,9 @@ def flight_arrays(log: McapLog, flight: LoggedFlight, *, estimate: bool = True) 
 def flight_record(log: McapLog, flight: LoggedFlight, ts_s: float) -> tuple[Any, bool]:
     """The :class:`gcs.metrics.FlightRecord` of a logged flight, and whether it is partial.
 
-    Simulation (``/sim/truth``): K = the commands, with the K + 1 truth states and references.
-    Flight (estimates only): K = ticks - 1, the last tick's state closing the record.
+    K = the commands, with the K + 1 states (truth in simulation, estimates in flight) and
+    references: both ``gcs sim`` and ``gcs fly`` log the state and reference after the last
+    command.  In a truncated log the last tick's state closes the record (K = ticks - 1).
 
     Raises
     ------
@@ -162,10 +163,12 @@ def record_from_arrays(state: np.ndarray, ref: np.ndarray, command: np.ndarray, 
     from gcs.metrics import FlightRecord
 
     s, r, u, j = state, ref, command, steps_to_go
-    if truth:
-        k = min(u.shape[0], s.shape[0] - 1, r.shape[0] - 1)
-    else:
-        k = min(u.shape[0], s.shape[0], r.shape[0]) - 1
+    # A complete flight logs the state and reference after its last command (K commands, K + 1
+    # states); a truncated one ends with a tick whose state then closes the record.  Ticks past
+    # the planned steps (a descent the ground station flew after the mission) are not measured.
+    k = min(u.shape[0], s.shape[0] - 1, r.shape[0] - 1)
+    if planned_steps is not None and planned_steps > 0:
+        k = min(k, int(planned_steps))
     if k < 1:
         raise LogError(f"{what} has no complete control tick to compute metrics on")
     if j.shape[0] < k:
@@ -213,8 +216,10 @@ def logged_metrics(log: McapLog, config: Any = None) -> list[dict]:
     cfg = log_config(log, config)
     mission = Mission(cfg.mission, zero_velocity=cfg.experiment.zero_velocity_reference)
     in_run = {}
-    for _, d in log.decoded(T.SIM_METRICS) if T.SIM_METRICS in log.messages else []:
-        in_run[d.get("flight")] = {k: v for k, v in d.items() if k not in ("flight", "controller", "run")}
+    for topic in T.RUN_METRICS:
+        for _, d in log.decoded(topic) if topic in log.messages else []:
+            if isinstance(d, dict):
+                in_run[d.get("flight")] = {k: v for k, v in d.items() if k not in ("flight", "controller", "run")}
     out = []
     flights = split_flights(log)
     for fl in flights:
@@ -282,7 +287,7 @@ class _MetricsStream:
                 raise LogError(f"{self.path}: a /flight message is not a JSON object")
             self.flight = _StreamedFlight(info, t)
             return
-        if topic == T.SIM_METRICS:
+        if topic in T.RUN_METRICS:
             d = json.loads(data.decode())
             if isinstance(d, dict) and isinstance(d.get("flight"), int):
                 self.in_run[d["flight"]] = {k: v for k, v in d.items() if k not in ("flight", "controller", "run")}

@@ -93,13 +93,13 @@ class SimFlightEnd:
 
 
 def horizon_modes(k0: int, n: int, horizon_steps: int | None, after: str | None) -> list[str]:
-    """Mode of ticks k0 .. k0 + n - 1: ``horizon`` within it, then ``terminal`` / ``restart`` /
-    ``fallback_pd``; ``pd`` without one."""
+    """Mode of ticks k0 .. k0 + n - 1 (:func:`gcs.control.base.horizon_mode` of each)."""
+    from gcs.control.base import horizon_mode
+
     if horizon_steps is None:
         return ["pd"] * n
     inside = max(0, min(n, horizon_steps - k0))
-    later = {"pd": "fallback_pd"}.get(after or "", after or "after")
-    return ["horizon"] * inside + [later] * (n - inside)
+    return ["horizon"] * inside + [horizon_mode(horizon_steps, horizon_steps, after)] * (n - inside)
 
 
 def stage_costs(state: np.ndarray, ref: np.ndarray, command: np.ndarray, cost: Any, mass_kg: float,

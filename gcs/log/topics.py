@@ -13,8 +13,8 @@ from typing import Mapping
 __all__ = [
     "STATE_FIELDS", "COMMAND_FIELDS", "HORIZON_FIELDS", "COST_FIELDS", "FIXED_FIELDS",
     "STATE", "REFERENCE", "ERROR", "COMMAND", "COMMAND_LIMITED", "HORIZON", "COST", "TRUTH",
-    "TIMING", "EVENTS", "FLIGHT", "SIM_METRICS", "MAVLINK_RAW", "MAVLINK_IN", "MAVLINK_OUT",
-    "schema_for", "schema_json", "mavlink_topic",
+    "TIMING", "EVENTS", "FLIGHT", "SIM_METRICS", "FLIGHT_METRICS", "MAVLINK_RAW", "MAVLINK_IN", "MAVLINK_OUT",
+    "RIG_RAW", "RIG_IN", "RIG_OUT", "RUN_METRICS", "schema_for", "schema_json", "mavlink_topic", "rig_topic",
 ]
 
 STATE = "/control/state"
@@ -26,12 +26,18 @@ HORIZON = "/control/horizon"
 COST = "/control/cost"
 TRUTH = "/sim/truth"
 SIM_METRICS = "/sim/metrics"
+FLIGHT_METRICS = "/flight/metrics"
+#: Topics carrying the metrics computed during the run (simulation or flight).
+RUN_METRICS = (SIM_METRICS, FLIGHT_METRICS)
 TIMING = "/loop/timing"
 EVENTS = "/events"
 FLIGHT = "/flight"
 MAVLINK_RAW = "/mavlink/raw"
 MAVLINK_IN = "/mavlink/in/"
 MAVLINK_OUT = "/mavlink/out/"
+RIG_RAW = "/rig/raw"
+RIG_IN = "/rig/in/"
+RIG_OUT = "/rig/out/"
 
 #: State fields in :class:`gcs.model.State` order (paper frame, z up) with units.
 STATE_FIELDS = ("x", "y", "z", "vx", "vy", "vz", "roll", "pitch", "yaw", "roll_rate", "pitch_rate", "yaw_rate")
@@ -104,6 +110,15 @@ _SCHEMAS: dict[str, tuple[str, dict]] = {
     SIM_METRICS: ("gcs.Metrics", _obj("Metrics", "The metrics gcs sim computed in the run (see gcs.metrics)", {
         "flight": {"type": "integer"},
     }, ("flight",), extra=True)),
+    FLIGHT_METRICS: ("gcs.Metrics", _obj("Metrics", "The metrics gcs fly computed in flight (see gcs.metrics)", {
+        "flight": {"type": "integer"},
+    }, ("flight",), extra=True)),
+    RIG_RAW: ("gcs.RigFrame", _obj("Rig frame", "A raw 4-DOF rig frame (XBee API-2, escaped, as on the wire) sent "
+                                   "or received, or received bytes that held no valid frame (type GARBAGE)", {
+        "dir": {"type": "string", "enum": ["in", "out"]},
+        "type": {"type": "string", "description": "message name (docs/rig-protocol.md) or GARBAGE"},
+        "data_b64": {"type": "string", "contentEncoding": "base64", "description": "bytes, base64"},
+    }, ("dir", "data_b64"))),
     MAVLINK_RAW: ("gcs.MavlinkFrame", _obj("MAVLink frame", "A raw MAVLink frame as sent or received (replayable)", {
         "dir": {"type": "string", "enum": ["in", "out"]},
         "type": {"type": "string", "description": "message type name"},
@@ -119,6 +134,13 @@ def mavlink_topic(direction: str, msg_type: str) -> str:
     return f"/mavlink/{direction}/{msg_type}"
 
 
+def rig_topic(direction: str, msg_name: str) -> str:
+    """``/rig/in/<NAME>`` or ``/rig/out/<NAME>`` (names of docs/rig-protocol.md, e.g. TELEMETRY)."""
+    if direction not in ("in", "out"):
+        raise ValueError(f"direction must be 'in' or 'out', got {direction!r}")
+    return f"/rig/{direction}/{msg_name}"
+
+
 def schema_for(topic: str) -> tuple[str, dict]:
     """``(schema name, jsonschema dict)`` of a topic; an open object schema for unknown topics."""
     known = _SCHEMAS.get(topic)
@@ -127,6 +149,10 @@ def schema_for(topic: str) -> tuple[str, dict]:
     if topic.startswith(MAVLINK_IN) or topic.startswith(MAVLINK_OUT):
         msg_type = topic.rsplit("/", 1)[-1]
         return (f"mavlink.{msg_type}", _obj(msg_type, "MAVLink message fields as decoded by pymavlink", {}, extra=True))
+    if topic.startswith(RIG_IN) or topic.startswith(RIG_OUT):
+        msg_type = topic.rsplit("/", 1)[-1]
+        return (f"rig.{msg_type}", _obj(msg_type, "4-DOF rig message fields (docs/rig-protocol.md; SI units as "
+                                        "named)", {}, extra=True))
     return ("gcs.Message", _obj(topic, "", {}, extra=True))
 
 

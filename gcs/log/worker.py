@@ -1,4 +1,10 @@
-"""The log writer process of :class:`gcs.log.simlog.BackgroundSimLog`: ``python -m gcs.log.worker``.
+"""The log writer process of :class:`gcs.log.simlog.BackgroundSimLog` and
+:class:`gcs.log.flightlog.BackgroundFlightLog`: ``python -m gcs.log.worker``.
+
+Flight logs (``("open", path, {..., "flight": True})``): then framed pickled lists of the
+items of :mod:`gcs.log.flightlog`, ending with ``[("close",)]`` or the end of stdin.
+
+Simulation logs:
 
 Reads framed pickles from stdin — ``("open", path, kwargs)``, then per flight ``("begin",
 SimFlightHeader)``, ``("block", SimBlock)``... ``("end", SimFlightEnd)``, and
@@ -31,12 +37,15 @@ def main() -> int:
     first = _recv(inp)
     if first is None or first[0] != "open":
         return 2
-    path, kwargs = first[1], first[2]
+    path, kwargs = first[1], dict(first[2])
+    flight_mode = bool(kwargs.pop("flight", False))
     try:
         log = FlightLog(path, check=False, **kwargs)
     except LogError as exc:
         _send(out, ("error", str(exc)))
         return 1
+    if flight_mode:
+        return _flight(log, path, inp, out)
     # A reader thread keeps taking blocks from the pipe while this one formats and compresses
     # (both release the GIL for their I/O), so the simulation rarely waits on a full pipe.
     pending: queue.Queue = queue.Queue(maxsize=READ_AHEAD)
@@ -90,6 +99,48 @@ def main() -> int:
                              "bytes": os.path.getsize(path)}))
     except (BrokenPipeError, OSError):
         return 1  # nobody is listening any more; the file is finished anyway
+    return 0
+
+
+def _flight(log, path: str, inp, out) -> int:
+    """Write a flight's items until ("close",) or the end of stdin (the ground station died)."""
+    from gcs.errors import LogError
+    from gcs.log.flightlog import FlightItemWriter
+    from gcs.log.simlog import _recv, _send
+
+    writer = FlightItemWriter(log)
+    error = None
+    try:
+        while True:
+            try:
+                items = _recv(inp)
+            except Exception as exc:  # a garbled frame (the parent died mid-write): keep what we have
+                error = f"cannot read from the ground station: {type(exc).__name__}: {exc}"
+                break
+            if items is None:
+                break
+            if items and items[-1][0] == "close":
+                for item in items[:-1]:
+                    writer.apply(item)
+                break
+            for item in items:
+                writer.apply(item)
+    except LogError as exc:
+        error = str(exc)
+    except Exception as exc:  # a process boundary: report any failure, then finish the file
+        error = f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"
+    try:
+        log.close()
+    except LogError as exc:
+        error = error or str(exc)
+    try:
+        if error is not None:
+            _send(out, ("error", error))
+            return 1
+        _send(out, ("done", {"messages": log.message_count, "bytes": os.path.getsize(path),
+                             "undecodable": writer.undecodable}))
+    except (BrokenPipeError, OSError):
+        return 1
     return 0
 
 
