@@ -9,6 +9,12 @@ Run: ``python benchmarks/bench_log.py [--quick] [--json]``.  Prints
   target <= 50 us for the 6-message tick;
 * the simulation speed without a log, with the log written in-process and with the
   background writer process (what ``gcs sim`` uses), in simulated seconds per wall second;
+* what ``gcs fly`` pays per control tick to log it (:class:`gcs.flight.recorder.FlightRecorder`
+  into the writer process, real pymavlink frames: ATTITUDE and LOCAL_POSITION_NED in,
+  SET_ATTITUDE_TARGET out, plus the tick): median us back to back and paced at 100 Hz (a
+  sleep between ticks, as in flight; on this VM cold caches after a sleep slow every piece of
+  Python, so the same pacing is measured for the estimator + controller step as a baseline);
+  target <= 50 us;
 * ``gcs log metrics`` on a 10-minute 100 Hz flight log (the library call, and the
   whole command in a fresh interpreter): target <= 3 s; and the log size per tick.
 """
@@ -133,21 +139,93 @@ def bench_sim_runs(config, duration_s: float, runs: int, tmp: Path) -> tuple[flo
     return plain, logged
 
 
+def _mavlink_frames():
+    """Real pymavlink messages as gcs fly sees them each tick (packed, so they have their bytes)."""
+    os.environ.setdefault("MAVLINK20", "1")
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+    m = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    att = m.attitude_encode(100, 0.01, -0.02, 1.5, 0.001, 0.002, 0.0)
+    pos = m.local_position_ned_encode(100, 1.0, 2.0, -1.5, 0.1, 0.0, -0.01)
+    sat = m.set_attitude_target_encode(100, 1, 1, 0, (1.0, 0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.39)
+    for msg in (att, pos, sat):
+        msg.pack(m)
+    return att, pos, sat
+
+
+def _fly_tick(rec, k: int, frames, state, ref, cmd) -> None:
+    att, pos, sat = frames
+    t = k * 10_000_000
+    rec.mavlink(t, "in", att)
+    rec.mavlink(t, "in", pos)
+    rec.mavlink(t, "out", sat)
+    rec.tick(t, k, state, ref, cmd, cmd, max(0, 60000 - k), "horizon", (1e-5, 3e-4, False, 1e-4, 1e-5, 2e-5, 1e-4, 3e-5))
+
+
+def bench_fly_tick(tmp: Path, ticks: int, paced_ticks: int) -> dict:
+    """Median and p99 us of what gcs fly's loop pays to log one tick, and the paced baseline."""
+    from gcs.config import load_config as _load
+    from gcs.estimate import StateEstimator
+    from gcs.flight.recorder import FlightRecorder
+    from gcs.log.flightlog import BackgroundFlightLog
+    from gcs.model import ModelParams
+
+    frames = _mavlink_frames()
+    states, refs, cmds = _inputs(1000, seed=2)
+    out = {}
+    for label, n, pause in (("back_to_back", ticks, 0.0), ("paced_100hz", paced_ticks, 0.0097)):
+        rec = FlightRecorder(BackgroundFlightLog(tmp / f"fly_{label}.mcap"))
+        rec.flight_start(0, controller="nlsoc", experiment="x", ts_s=0.01, steps=n, cost=None)
+        samples = []
+        for k in range(n):
+            i = k % 1000
+            t0 = time.perf_counter_ns()
+            _fly_tick(rec, k, frames, states[i], refs[i], cmds[i])
+            samples.append(time.perf_counter_ns() - t0)
+            if pause:
+                time.sleep(pause)
+        rec.close()
+        samples.sort()
+        out[f"fly_log_{label}_median_us"] = samples[len(samples) // 2] / 1000
+        out[f"fly_log_{label}_p99_us"] = samples[int(len(samples) * 0.99)] / 1000
+        out[f"fly_log_{label}_dropped"] = rec.stats.get("dropped", 0)
+    # Baseline at the same pacing: the estimator predict + the controller step of a tick.
+    cfg = _load("outdoor-circle")
+    ctl = make_controller("nlsoc", cfg)
+    est = StateEstimator(0.01, ModelParams(1.0, 9.81), (0.05,) * 3, 1.0)
+    est.correct_position((0.0, 0.0, 1.0))
+    samples = []
+    for k in range(paced_ticks):
+        t0 = time.perf_counter_ns()
+        est.predict(0.01, cmds[k % 1000])
+        ctl.step(k, est.state(), refs[k % 1000])
+        samples.append(time.perf_counter_ns() - t0)
+        time.sleep(0.0097)
+    samples.sort()
+    out["paced_100hz_estimate_control_median_us"] = samples[len(samples) // 2] / 1000
+    return out
+
+
 def make_flight_log(path: Path, config, minutes: float) -> int:
-    """A flight-like log (estimates only, limited commands, timing, MAVLink) of ``minutes`` at 100 Hz."""
+    """A gcs fly log of ``minutes`` at 100 Hz as the flight loop writes it (recorder -> writer process):
+    per tick the control topics, timing and three MAVLink frames decoded and raw."""
+    from gcs.flight.recorder import FlightRecorder
+    from gcs.log.flightlog import BackgroundFlightLog, StageCost
+    from gcs.log.meta import run_attachments, run_metadata
+    from gcs.metrics import controller_cost
+
     n = int(minutes * 60 * 100)
     states, refs, cmds = _inputs(1000, seed=1)
-    att = _Msg("ATTITUDE", {"roll": 0.01, "pitch": -0.02, "yaw": 1.5}, 40)
-    with FlightLog(path) as log:
-        write_run_header(log, config, ["loc"], {}, source="flight")
-        log.flight_start(0, controller="loc", experiment=config.experiment.name, ts_s=0.01)
-        for k in range(n):
-            t = k * 10_000_000
-            i = k % 1000
-            log.mavlink(t, "in", att)
-            log.control_tick(t, state=states[i], reference=refs[i], command=cmds[i], command_limited=cmds[i], k=k,
-                             steps_to_go=max(0, 60000 - k), cost=(1.0, 2.0, 3.0))
-            log.loop_timing(t, k=k, jitter_s=1e-4, tick_s=3e-4, deadline_missed=False)
+    frames = _mavlink_frames()
+    rec = FlightRecorder(BackgroundFlightLog(path))
+    rec.header(run_metadata(config, ["loc"], source="flight"), run_attachments(config, {}))
+    rec.flight_start(0, controller="loc", experiment=config.experiment.name, ts_s=0.01, steps=n,
+                     cost=StageCost.spec_of(controller_cost("loc", config), 1.0, 9.81))
+    for k in range(n):
+        i = k % 1000
+        _fly_tick(rec, k, frames, states[i], refs[i], cmds[i])
+    rec.flight_end(n * 10_000_000, states[0], refs[0])
+    rec.close()
     return n
 
 
@@ -181,6 +259,7 @@ def main(argv=None) -> int:
                                                                          flight_like=False)
         out["tick_13msg_median_us"], out["tick_13msg_cpu_us"] = bench_tick(tmp / "tick13.mcap", batches, per_batch,
                                                                            flight_like=True)
+        out.update(bench_fly_tick(tmp, 2000 if args.quick else 10000, 300 if args.quick else 1000))
         circle = load_config("outdoor-circle")
         for mode in ("none", "inline", "background"):
             out[f"sim_realtime_ratio_{mode}"] = bench_sim(circle, sim_s, repeats, mode, tmp)
@@ -213,6 +292,12 @@ def main(argv=None) -> int:
           f"{ok(out['tick_6msg_median_us'], TARGET_TICK_US)})")
     print(f"log one flight-like tick, 13 messages (+ limited command, cost, timing, 3 MAVLink + raw): "
           f"{out['tick_13msg_median_us']:.1f} us ({out['tick_13msg_cpu_us']:.1f} us CPU)")
+    print(f"gcs fly: logging one control tick (recorder -> writer process; 3 MAVLink frames + the tick): "
+          f"median {out['fly_log_back_to_back_median_us']:.1f} us back to back (p99 {out['fly_log_back_to_back_p99_us']:.0f}), "
+          f"{out['fly_log_paced_100hz_median_us']:.1f} us paced at 100 Hz (p99 {out['fly_log_paced_100hz_p99_us']:.0f}) "
+          f"(target <= {TARGET_TICK_US:g} us: {ok(out['fly_log_paced_100hz_median_us'], TARGET_TICK_US)}); "
+          f"baseline at 100 Hz: estimator + nlsoc step {out['paced_100hz_estimate_control_median_us']:.1f} us; "
+          f"records dropped {out['fly_log_back_to_back_dropped'] + out['fly_log_paced_100hz_dropped']}")
     print(f"simulation x real time, outdoor-circle {sim_s:g} s nlsoc flight: no log "
           f"{out['sim_realtime_ratio_none']:.0f}, log in-process {out['sim_realtime_ratio_inline']:.0f}, "
           f"background writer {out['sim_realtime_ratio_background']:.0f}")

@@ -155,19 +155,16 @@ def test_an_excessive_command_trips_the_rigs_cutoff_and_the_flight_stops(rig):
     assert snap["state"] == RigState.DISARMED and not snap["flags"] & RigFlags.CUTOFF  # cleared once the motors were off
 
 
-def test_a_rig_not_on_the_ground_is_refused(tmp_path):
-    from sitl.reduced import PlantState
+def test_an_already_armed_rig_is_refused(rig):
+    from gcs.flight.loop import PreflightRefused
 
-    clock = MonotonicClock()
-    with RigServer(PtyTransport(clock.monotonic_ns), lockstep=True, seed=1, clock=clock,
-                   initial=PlantState(z=0.4)) as server:
-        link = RigLink(server.connection_string)
-        flight = RigFlight(_short(), "pd", link, None)
-        from gcs.flight.loop import PreflightRefused
-        with pytest.raises(PreflightRefused):
-            flight.preflight()
-        link.close()
-        assert server.snapshot()["state"] == RigState.DISARMED
+    with rig._lock:
+        rig.firmware.arm()  # someone else's ground station armed it
+    link = RigLink(rig.connection_string)
+    flight = RigFlight(_short(), "pd", link, None)
+    with pytest.raises(PreflightRefused, match="already armed"):
+        flight.preflight()
+    link.close()
 
 
 def test_rig_link_budget_and_cli_refusals(tmp_path):

@@ -229,16 +229,20 @@ class RigFlight(FlightLoop):
         elif self.state_rig in (RigState.ARMED, RigState.DESCENT):
             raise PreflightRefused(f"the rig is already {RigState(self.state_rig).name.lower()}; gcs fly starts from "
                                    "a disarmed rig on the ground")
-        # Fresh telemetry and an estimate.  In lockstep the rig sends telemetry only when a
-        # control frame moves its time: a zero-thrust frame (ignored while disarmed) does that.
+        # Fresh telemetry and 0.5 s of it into the estimate (its velocities settle) before arming.
+        # In lockstep the rig sends telemetry only when a control frame moves its time: zero-thrust
+        # frames (ignored while disarmed) do that.
         end = time.monotonic() + 5.0
+        first_ns = None
         while time.monotonic() < end:
             self._check_interrupt()
             if self.lockstep:
                 self._control_frame(0.0, 0.0, 0.0, 0.0)
             self._pump_wait(0.02)
             if self.estimator.initialised and self._fresh(self.now_ns(), fc.telemetry_stale_s):
-                break
+                first_ns = self._time_ns if first_ns is None else first_ns
+                if self._time_ns - first_ns >= 500_000_000:
+                    break
         else:
             raise PreflightRefused("no fresh TELEMETRY from the rig within 5 s")
         if not self.flags & RigFlags.LANDED:

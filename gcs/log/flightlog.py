@@ -133,7 +133,8 @@ class FlightItemWriter:
         self.log = log
         self.cost: StageCost | None = None
         self._mav = None
-        self._rig = None
+        self._rig: dict[str, Any] = {}
+        self._rig_templates: dict = {}
         self.undecodable = 0
 
     # ------------------------------------------------------------------ frames
@@ -146,12 +147,31 @@ class FlightItemWriter:
             self._mav.robust_parsing = True
         return self._mav
 
-    def _rig_decoder(self):
-        if self._rig is None:
+    def _rig_decoder(self, direction: str):
+        """One decoder per direction: the received stream is replayed through it as it came."""
+        dec = self._rig.get(direction)
+        if dec is None:
             from sitl import rig_protocol as rp
 
-            self._rig = rp.RigDecoder(rp.MESSAGE_TYPES.values())
-        return self._rig
+            dec = self._rig[direction] = rp.RigDecoder(rp.MESSAGE_TYPES.values())
+        return dec
+
+    def _rig_json(self, direction: str, msg: Any) -> tuple[str, bytes]:
+        """``(topic, JSON)`` of a rig message; all-number messages through a cached template."""
+        cls = type(msg)
+        cached = self._rig_templates.get((direction, cls))
+        if cached is None:
+            names = tuple(f.name for f in dataclasses.fields(msg))
+            numeric = all(isinstance(getattr(msg, n), (int, float)) for n in names)
+            cached = self._rig_templates[(direction, cls)] = (T.rig_topic(direction, msg.NAME), names,
+                                                              _Template(names) if numeric else None)
+        topic, names, tmpl = cached
+        if tmpl is not None:
+            try:
+                return topic, tmpl.encode(tuple(getattr(msg, n) for n in names))
+            except (TypeError, ValueError):
+                pass
+        return topic, _dumps({n: _plain(getattr(msg, n)) for n in names}).encode()
 
     def frame(self, t: int, protocol: str, direction: str, data: bytes, decoded: bool) -> None:
         log = self.log
@@ -167,12 +187,11 @@ class FlightItemWriter:
             else:
                 log.mavlink_raw(t, direction, data, "" if decoded else "DROPPED")
             return
-        msgs = self._rig_decoder().feed(data) if decoded else []
+        msgs = self._rig_decoder(direction).feed(data) if decoded else []
         name = msgs[0].NAME if len(msgs) == 1 else ""
         items = []
         for m in msgs:
-            fields = {f.name: _plain(getattr(m, f.name)) for f in dataclasses.fields(m)}
-            items.append((T.rig_topic(direction, m.NAME), _dumps(fields).encode()))
+            items.append(self._rig_json(direction, m))
         items.append((T.RIG_RAW, _dumps({"dir": direction, "type": name,
                                          "data_b64": base64.b64encode(data).decode("ascii")}).encode()))
         log._add(items, t, None)
