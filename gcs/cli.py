@@ -5,6 +5,7 @@ Subcommands:
 * ``gcs sim``: fly the paper's controllers on the in-process simulation and print
   a table like the paper's Tables 1, 2 and 4 (``--json`` for machines).
 * ``gcs configs``: list the bundled experiment configs.
+* ``gcs campaign``: the paper's experiments through ``gcs fly``, in parallel (:mod:`gcs.campaign`).
 * ``gcs link-budget``: MAVLink 2 bytes per second each way over a serial link
   (exit 1 when it does not fit, with configurations that do).
 
@@ -109,6 +110,9 @@ def build_parser() -> argparse.ArgumentParser:
     from gcs.flight.command import add_fly_parser
     add_fly_parser(sub, _positive_int, _positive_float)
 
+    from gcs.campaign.cli import add_campaign_parser
+    add_campaign_parser(sub)
+
     b = sub.add_parser("link-budget", help="bytes per second each way of the 100 Hz exchange over a serial link",
                        description="Compute the MAVLink 2 link budget of the control exchange at a baud rate: "
                                    "telemetry down, setpoints up, housekeeping both ways.")
@@ -207,6 +211,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             return cmd_fly(args, format_table)
         if args.command == "link-budget":
             return _cmd_link_budget(args)
+        if args.command == "campaign":
+            from gcs.campaign.cli import cmd_campaign
+            return cmd_campaign(args, list(sys.argv[1:] if argv is None else argv))
         if args.command == "log":
             from gcs.log.cli import cmd_log
             return cmd_log(args)
