@@ -86,7 +86,7 @@ def test_every_channel_is_there_and_round_trips(flown):
             assert len(raw) == len(chan)
             assert all(m.to_dict() == dict(d, mavpackettype=mtype) for m, d in zip(raw, chan))
     # Per-tick internals: error = reference - estimate, the command before and after the envelope, horizon.
-    (t0, s0), (_, r0), (_, e0) = log.decoded(T.STATE)[0], log.decoded(T.REFERENCE)[0], log.decoded(T.ERROR)[0]
+    (_, s0), (_, r0), (_, e0) = log.decoded(T.STATE)[0], log.decoded(T.REFERENCE)[0], log.decoded(T.ERROR)[0]
     assert e0["z"] == pytest.approx(r0["z"] - s0["z"])
     hor = [d for _, d in log.decoded(T.HORIZON)]
     assert [h["k"] for h in hor] == list(range(ticks)) and hor[0]["mode"] == "horizon" and hor[0]["steps_to_go"] > 0

@@ -153,12 +153,19 @@ def cmd_fly(args: argparse.Namespace, format_table) -> int:
                 return _finish(args, None, "preflight_refused", config, "link budget exceeded")
             budget_ok = True
             console("[warning] link budget exceeded; flying anyway (--force-budget)")
+    return _logged(args, config, "mavlink", lambda rec: _fly_mavlink(args, config, key, console, budget_ok, rec,
+                                                                    format_table))
+
+
+def _logged(args: argparse.Namespace, config, vehicle: str, fly) -> int:
+    """Open the flight log (refused before anything flies if it cannot be written), run ``fly(recorder)``,
+    finish the log whatever happens."""
     try:
-        recorder = open_flight_log(args, config, args.controller, vehicle="mavlink")
+        recorder = open_flight_log(args, config, args.controller, vehicle=vehicle)
     except PreflightRefused as exc:
         return _finish(args, None, "preflight_refused", config, str(exc))
     try:
-        return _fly_mavlink(args, config, key, console, budget_ok, recorder, format_table)
+        return fly(recorder)
     finally:
         recorder.close()
         if recorder.path is not None and not args.quiet:
@@ -184,40 +191,44 @@ def _fly_mavlink(args, config, key, console, budget_ok, recorder, format_table) 
         print(f"gcs: error: {exc}", file=sys.stderr)
         recorder.event(0, "failsafe", f"link error: {exc}")
         return _finish(args, None, "link_error", config, str(exc))
+    return _fly(args, config, Flight, link, sitl, lockstep, recorder, console, format_table, budget_ok=budget_ok)
+
+
+def _fly(args, config, flight_class, link, child, lockstep: bool, recorder, console, format_table,
+         **preflight_kwargs) -> int:
+    """Preflight and fly ``flight_class`` over ``link``; the link and the child simulator (if any) end with it."""
     interrupts = _Interrupts()
     clock = None if lockstep else MonotonicClock()
     if clock is not None:
         recorder.offset_ns = utc_offset_ns(clock.now_ns())
     try:
         with interrupts:
-            flight = Flight(config, args.controller, link, clock, console=console, interrupts=interrupts,
-                            recorder=recorder)
+            flight = flight_class(config, args.controller, link, clock, console=console, interrupts=interrupts,
+                                  recorder=recorder)
             try:
-                flight.preflight(budget_ok)
+                flight.preflight(**preflight_kwargs)
             except PreflightRefused as exc:
                 flight.event("failsafe", f"preflight refused: {exc}")
                 flight.restore_params()
                 return _finish(args, None, "preflight_refused", config, str(exc), flight.events)
             except LinkError as exc:
-                if sitl is not None:
-                    sitl.check_alive()
+                if child is not None:
+                    child.check_alive()
                 flight.event("failsafe", f"link error: {exc}")
                 return _finish(args, None, "link_error", config, str(exc), flight.events)
             result = flight.fly()
             flight.restore_params()
     finally:
         link.close()
-        if sitl is not None:
-            sitl.stop()
+        if child is not None:
+            child.stop()
     return _report(args, result, config, format_table)
 
 
 def _cmd_fly_rig(args: argparse.Namespace, format_table) -> int:
     """``gcs fly --rig 4dof``: the rig on ``--port`` at ``--baud`` (115200), or its emulator."""
     from gcs.errors import ConfigError
-    from gcs.flight.embedded import EmbeddedRig
-    from gcs.flight.rig import RigFlight
-    from gcs.link.rig import RigLink, rig_link_budget
+    from gcs.link.rig import rig_link_budget
 
     for flag, given in (("--connect", args.connect), ("--signing-key", args.signing_key), ("--output", args.output),
                         ("--lockstep", args.lockstep or None)):
@@ -237,56 +248,30 @@ def _cmd_fly_rig(args: argparse.Namespace, format_table) -> int:
                 print("refusing to fly (--force-budget overrides)", file=sys.stderr)
                 return _finish(args, None, "preflight_refused", config, "link budget exceeded")
             console("[warning] link budget exceeded; flying anyway (--force-budget)")
-    try:
-        recorder = open_flight_log(args, config, args.controller, vehicle=f"rig {args.rig}")
-    except PreflightRefused as exc:
-        return _finish(args, None, "preflight_refused", config, str(exc))
+    return _logged(args, config, f"rig {args.rig}", lambda rec: _fly_rig(args, config, baud, console, rec,
+                                                                        format_table))
+
+
+def _fly_rig(args, config, baud: int, console, recorder, format_table) -> int:
+    from gcs.flight.embedded import EmbeddedRig
+    from gcs.flight.rig import RigFlight
+    from gcs.link.rig import RigLink
+
     rig = None
     lockstep = args.port is None and args.sitl == "lockstep"
     try:
-        try:
-            if args.port is None:
-                # Lockstep runs without the emulated baud limit (as fast as it computes) unless asked.
-                rig = EmbeddedRig(lockstep=lockstep, seed=args.seed, baud=0 if lockstep else baud,
-                                  extra_args=args.sitl_arg).start()
-                console(f"[link] rig emulator ({'lockstep' if lockstep else 'real time'}) on {rig.device}")
-                port = rig.device
-            else:
-                port = args.port
-            link = RigLink(port, baud)
-        except LinkError as exc:
-            print(f"gcs: error: {exc}", file=sys.stderr)
-            if rig is not None:
-                rig.stop()
-            return _finish(args, None, "link_error", config, str(exc))
-        interrupts = _Interrupts()
-        clock = None if lockstep else MonotonicClock()
-        if clock is not None:
-            recorder.offset_ns = utc_offset_ns(clock.now_ns())
-        try:
-            with interrupts:
-                flight = RigFlight(config, args.controller, link, clock, console=console, interrupts=interrupts,
-                                   recorder=recorder)
-                try:
-                    flight.preflight()
-                except PreflightRefused as exc:
-                    flight.event("failsafe", f"preflight refused: {exc}")
-                    return _finish(args, None, "preflight_refused", config, str(exc), flight.events)
-                except LinkError as exc:
-                    if rig is not None:
-                        rig.check_alive()
-                    flight.event("failsafe", f"link error: {exc}")
-                    return _finish(args, None, "link_error", config, str(exc), flight.events)
-                result = flight.fly()
-        finally:
-            link.close()
-            if rig is not None:
-                rig.stop()
-        return _report(args, result, config, format_table)
-    finally:
-        recorder.close()
-        if recorder.path is not None and not args.quiet:
-            print(f"log: {recorder.path}", file=sys.stderr)
+        if args.port is None:
+            # Lockstep runs without the emulated baud limit (as fast as it computes) unless asked.
+            rig = EmbeddedRig(lockstep=lockstep, seed=args.seed, baud=0 if lockstep else baud,
+                              extra_args=args.sitl_arg).start()
+            console(f"[link] rig emulator ({'lockstep' if lockstep else 'real time'}) on {rig.device}")
+        link = RigLink(rig.device if rig is not None else args.port, baud)
+    except LinkError as exc:
+        print(f"gcs: error: {exc}", file=sys.stderr)
+        if rig is not None:
+            rig.stop()
+        return _finish(args, None, "link_error", config, str(exc))
+    return _fly(args, config, RigFlight, link, rig, lockstep, recorder, console, format_table)
 
 
 def _report(args, result: FlightResult, config, format_table) -> int:

@@ -74,7 +74,6 @@ class Flight(FlightLoop):
         self.telemetry = Telemetry(estimator, (fc.position_std_m ** 2,) * 3, (fc.velocity_std_m_s ** 2,) * 3,
                                    on_event=self._vehicle_event, target_component=link.target_component)
         self._restore: dict[str, float] = {}
-        self._link_down = False
         if clock is None:
             self.clock = VehicleClock(lambda: self.telemetry.status.time_boot_ms * 1_000_000, self._pump_wait)
         if self.recorder.enabled:
@@ -88,35 +87,8 @@ class Flight(FlightLoop):
     def _vehicle_event(self, kind: str, text: str) -> None:
         self.event(kind, text)
 
-    def _pump(self) -> int:
-        """Drain the link into the telemetry; returns the number of messages."""
-        now = self.clock.now_ns() if not self.lockstep else 0
-        try:
-            msgs = self.link.drain()
-        except LinkError as exc:
-            self._link_failed(exc)
-            return 0
-        for m in msgs:
-            self.telemetry.handle(m, now if not self.lockstep else self.clock.now_ns())
-        if msgs:
-            self._last_rx_wall = time.monotonic()
-        return len(msgs)
-
-    def _link_failed(self, exc: Exception) -> None:
-        """A dead link shows as stale telemetry (the failsafe acts); said once."""
-        if not self._link_down:
-            self._link_down = True
-            self.event("warning", f"link failure: {exc}")
-
-    def _send(self, msg) -> None:
-        try:
-            self.link.send(msg)
-        except LinkError as exc:
-            self._link_failed(exc)
-
-    def _pump_wait(self, wait_s: float) -> None:
-        if self._pump() == 0:
-            self.link.conn.select(wait_s)
+    def _handle(self, msg) -> None:
+        self.telemetry.handle(msg, self.clock.now_ns())
 
     def _wait_for(self, what: str, predicate: Callable[[], bool], timeout_s: float, *, thrust_n: float = 0.0,
                   send: bool = True) -> bool:
@@ -180,7 +152,7 @@ class Flight(FlightLoop):
         """A parameter of the vehicle; ``default=None`` makes it required (refuse without it)."""
         self._check_interrupt()
         try:
-            return self.link.param_get(name, timeout_s=1.0, retries=1, on_message=self._handle_now)
+            return self.link.param_get(name, timeout_s=1.0, retries=1, on_message=self._handle)
         except LinkError:
             if default is None:
                 raise PreflightRefused(f"parameter {name} not readable; it is needed to fly") from None
@@ -188,7 +160,7 @@ class Flight(FlightLoop):
             return default
 
     def _set_param(self, name: str, value: float, old: float) -> float:
-        new = self.link.param_set(name, value, on_message=self._handle_now)
+        new = self.link.param_set(name, value, on_message=self._handle)
         if new == value:
             self._restore.setdefault(name, old)
         return new
@@ -200,7 +172,7 @@ class Flight(FlightLoop):
                 self.event("warning", f"vehicle still armed: {name} left at its flight value")
                 continue
             try:
-                self.link.param_set(name, value, timeout_s=1.0, retries=1, on_message=self._handle_now)
+                self.link.param_set(name, value, timeout_s=1.0, retries=1, on_message=self._handle)
                 self.event("param", f"{name} restored to {value:g}")
                 del self._restore[name]
             except LinkError as exc:
@@ -213,15 +185,12 @@ class Flight(FlightLoop):
     def _timesync(self) -> None:
         self.telemetry.timesync_sent.add(self.link.send_timesync())
         self.link.wait(lambda m: m.get_type() == "TIMESYNC" and self.telemetry.timesync_rtt_ms is not None,
-                       1.0, self._handle_now)
-
-    def _handle_now(self, msg) -> None:
-        self.telemetry.handle(msg, self.clock.now_ns())
+                       1.0, self._handle)
 
     def preflight(self, budget_ok: bool = True) -> None:
         """Everything before arming; raises :class:`PreflightRefused` or :class:`LinkError`."""
         link, fc = self.link, self.flight_cfg
-        hb = link.wait_heartbeat(on_message=self._handle_now)
+        hb = link.wait_heartbeat(on_message=self._handle)
         self.event("link", f"connected to system {link.target_system} on {link.url} "
                            f"(autopilot {hb.autopilot}, type {hb.type})")
         self._check_interrupt()
@@ -245,7 +214,7 @@ class Flight(FlightLoop):
                  mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: fc.telemetry_rate_hz,
                  mavlink.MAVLINK_MSG_ID_SYS_STATUS: 2.0}
         for mid, hz in rates.items():
-            res = link.set_message_interval(mid, hz, on_message=self._handle_now)
+            res = link.set_message_interval(mid, hz, on_message=self._handle)
             if res != mavlink.MAV_RESULT_ACCEPTED:
                 self.event("warning", f"stream {mid} at {hz:g} Hz not accepted (MAV_RESULT {res})")
         guid = self._param("GUID_OPTIONS", 0.0)
@@ -283,7 +252,7 @@ class Flight(FlightLoop):
             elif volt < fc.min_battery_v:
                 raise PreflightRefused(f"battery {volt:.2f} V below {fc.min_battery_v:g} V")
         self._check_interrupt()
-        res = link.set_mode("GUIDED_NOGPS", on_message=self._handle_now)
+        res = link.set_mode("GUIDED_NOGPS", on_message=self._handle)
         if res != mavlink.MAV_RESULT_ACCEPTED:
             raise PreflightRefused(f"mode GUIDED_NOGPS refused (MAV_RESULT {res})")
         self._wait_for("mode", lambda: self.telemetry.status.custom_mode == 20, 3.0)
@@ -292,10 +261,10 @@ class Flight(FlightLoop):
             self._pump()
             self._idle_tick(0.0)
         self._check_interrupt()
-        res = link.arm(True, on_message=self._handle_now)
+        res = link.arm(True, on_message=self._handle)
         if res != mavlink.MAV_RESULT_ACCEPTED:
             # The reason comes as STATUSTEXT, before or just after the acknowledgement.
-            link.wait(lambda m: m.get_type() == "STATUSTEXT", 0.5, self._handle_now)
+            link.wait(lambda m: m.get_type() == "STATUSTEXT", 0.5, self._handle)
             texts = [t for t in self.telemetry.status.statustext if "arm" in t.lower()]
             why = texts[-1] if texts else f"MAV_RESULT {res}"
             raise PreflightRefused(f"arming refused: {why}")
@@ -355,7 +324,7 @@ class Flight(FlightLoop):
             res = self.link.command_long(mavlink.MAV_CMD_DO_SET_MODE,
                                          [mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 9],
                                          timeout_s=0.3 if quick else 3.0, retries=0 if quick else 2,
-                                         on_message=self._handle_now)
+                                         on_message=self._handle)
             if res != mavlink.MAV_RESULT_ACCEPTED:
                 self.event("warning", f"LAND refused (MAV_RESULT {res})")
         except LinkError as exc:

@@ -66,6 +66,7 @@ from gcs.flight.recorder import FlightRecorder
 from gcs.log.flightlog import StageCost
 from gcs.flight.safety import EnvelopeLimits, SafetyEnvelope
 from gcs.flight.stats import LoopStats
+from gcs.link.mavlink import LinkError
 from gcs.metrics import FlightRecord, controller_cost, flight_metrics
 from gcs.mission import Mission
 from gcs.model import Command, State
@@ -246,9 +247,47 @@ class FlightLoop:
         self.recorder.event(t, kind, text, **fields)
         self.console(f"[{kind}] {text}")
 
-    # ------------------------------------------------------------------ hooks
-    def _pump(self) -> int:
+    # ------------------------------------------------------------------ the link
+    # A subclass sets ``self.link`` (``drain()``, ``send(msg)``, ``wait_readable(s)``; raising
+    # LinkError) and implements ``_handle(msg)``.
+    link: object
+    _link_down = False
+    _last_rx_wall = 0.0
+
+    def _handle(self, msg) -> None:
         raise NotImplementedError
+
+    def _pump(self) -> int:
+        """Drain the link into the telemetry (never blocks); the number of messages."""
+        try:
+            msgs = self.link.drain()  # type: ignore[attr-defined]
+        except LinkError as exc:
+            self._link_failed(exc)
+            return 0
+        for m in msgs:
+            self._handle(m)
+        if msgs:
+            self._last_rx_wall = time.monotonic()
+        return len(msgs)
+
+    def _pump_wait(self, wait_s: float) -> None:
+        """Pump; when nothing was there, wait up to ``wait_s`` for bytes."""
+        if self._pump() == 0:
+            self.link.wait_readable(wait_s)  # type: ignore[attr-defined]
+
+    def _link_failed(self, exc: Exception) -> None:
+        """A dead link shows as stale telemetry (the failsafe acts); said once."""
+        if not self._link_down:
+            self._link_down = True
+            self.event("warning", f"link failure: {exc}")
+
+    def _send(self, msg) -> None:
+        try:
+            self.link.send(msg)  # type: ignore[attr-defined]
+        except LinkError as exc:
+            self._link_failed(exc)
+
+    # ------------------------------------------------------------------ hooks
 
     def _fresh(self, now_ns: int, stale_s: float) -> bool:
         raise NotImplementedError
@@ -275,6 +314,9 @@ class FlightLoop:
 
     def _link_summary(self) -> dict:
         return {}
+
+    def restore_params(self) -> None:
+        """Put back what was changed on the vehicle for the flight (nothing by default)."""
 
     # ------------------------------------------------------------------ the mission
     def _landing_mission(self, from_z: float, to_z: float) -> tuple[Mission, float]:

@@ -83,7 +83,6 @@ class RigFlight(FlightLoop):
         self._last_rx_ns: int | None = None
         self._last_rx_wall = time.monotonic()
         self._seq = 0
-        self._link_down = False
         self.rtt_ms: float | None = None
         self._hb_sent: dict[int, int] = {}
         if clock is None:
@@ -135,33 +134,6 @@ class RigFlight(FlightLoop):
             self.event("failsafe", "rig link watchdog: no control frames, the rig descends by itself")
         if changed & RigFlags.LANDED:
             self.event("landing", "on the ground" if flags & RigFlags.LANDED else "lifted off")
-
-    def _pump(self) -> int:
-        try:
-            msgs = self.link.drain()
-        except LinkError as exc:
-            self._link_failed(exc)
-            return 0
-        for m in msgs:
-            self._handle(m)
-        if msgs:
-            self._last_rx_wall = time.monotonic()
-        return len(msgs)
-
-    def _pump_wait(self, wait_s: float) -> None:
-        if self._pump() == 0:
-            self.link.wait_readable(wait_s)
-
-    def _link_failed(self, exc: Exception) -> None:
-        if not self._link_down:
-            self._link_down = True
-            self.event("warning", f"link failure: {exc}")
-
-    def _send(self, msg: rp.Message) -> None:
-        try:
-            self.link.send(msg)
-        except LinkError as exc:
-            self._link_failed(exc)
 
     def _heartbeat(self) -> None:
         t_us = (time.monotonic_ns() // 1000) & 0xFFFFFFFF

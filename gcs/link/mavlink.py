@@ -200,6 +200,10 @@ class MavlinkLink:
                 return None
             self.conn.select(min(0.02, remaining))
 
+    def wait_readable(self, timeout_s: float) -> None:
+        """Block until something arrives or ``timeout_s`` passes."""
+        self.conn.select(timeout_s)
+
     def wait_heartbeat(self, timeout_s: float = 10.0, on_message=None):
         """The first HEARTBEAT of the target, sending ours meanwhile (so UDP-out peers learn our address)."""
         deadline = time.monotonic() + timeout_s

@@ -42,8 +42,6 @@ import os
 import pickle
 import struct
 import subprocess
-import sys
-from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from gcs.errors import LogError
@@ -289,19 +287,10 @@ class BackgroundFlightLog:
     """
 
     def __init__(self, path: str | os.PathLike, *, expected_bytes: int = 0, **log_kwargs: Any) -> None:
-        self.path = check_writable(path, expected_bytes)
-        import gcs
+        from gcs.log.simlog import spawn_writer
 
-        env = dict(os.environ)
-        root = str(Path(gcs.__file__).resolve().parent.parent)
-        env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-        try:
-            # Its own session: a Ctrl-C at the terminal reaches the ground station only, which lands
-            # first and then closes the log.
-            self._proc = subprocess.Popen([sys.executable, "-m", "gcs.log.worker"], stdin=subprocess.PIPE,
-                                          stdout=subprocess.PIPE, env=env, start_new_session=True)
-        except OSError as exc:
-            raise LogError(f"{self.path}: cannot start the log writer process: {exc.strerror or exc}") from None
+        self.path = check_writable(path, expected_bytes)
+        self._proc = spawn_writer(self.path)
         self._fd = self._proc.stdin.fileno()  # type: ignore[union-attr]
         self._backlog = bytearray()
         self.dropped = 0

@@ -292,6 +292,29 @@ class SimRecorder:
 
 # --------------------------------------------------------------------------- background writer process
 
+def spawn_writer(path: Path) -> subprocess.Popen:
+    """Start ``python -m gcs.log.worker`` (stdin/stdout pipes) for the log at ``path``.
+
+    Its own session: a Ctrl-C at the terminal reaches this process only, which decides when
+    the log ends.
+
+    Raises
+    ------
+    LogError
+        When the process cannot start.
+    """
+    import gcs
+
+    env = dict(os.environ)
+    root = str(Path(gcs.__file__).resolve().parent.parent)
+    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    try:
+        return subprocess.Popen([sys.executable, "-m", "gcs.log.worker"], stdin=subprocess.PIPE,
+                                stdout=subprocess.PIPE, env=env, start_new_session=True)
+    except OSError as exc:
+        raise LogError(f"{path}: cannot start the log writer process: {exc.strerror or exc}") from None
+
+
 def _send(stream: Any, obj: Any) -> None:
     data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
     stream.write(struct.pack("<Q", len(data)))
@@ -335,15 +358,7 @@ class BackgroundSimLog:
     def __init__(self, path: str | os.PathLike, *, expected_bytes: int = 0, max_pending: int = 32,
                  **log_kwargs: Any) -> None:
         self.path = check_writable(path, expected_bytes)
-        import gcs
-        env = dict(os.environ)
-        root = str(Path(gcs.__file__).resolve().parent.parent)
-        env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-        try:
-            self._proc = subprocess.Popen([sys.executable, "-m", "gcs.log.worker"], stdin=subprocess.PIPE,
-                                          stdout=subprocess.PIPE, env=env, start_new_session=True)
-        except OSError as exc:
-            raise LogError(f"{self.path}: cannot start the log writer process: {exc.strerror or exc}") from None
+        self._proc = spawn_writer(self.path)
         self._closed = False
         self.stats: dict[str, int] = {}
         self._queue: queue.Queue = queue.Queue(maxsize=max_pending)

@@ -87,6 +87,14 @@ def main() -> int:
         error = str(exc)
     except Exception as exc:  # a process boundary: report any failure to the parent, then finish the file
         error = f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"
+    return _close(log, path, out, error, flights=log.flight_count)
+
+
+def _close(log, path: str, out, error: str | None, **stats) -> int:
+    """Finish the file and tell the parent: ("done", {"messages", "bytes", **stats}) or ("error", text)."""
+    from gcs.errors import LogError
+    from gcs.log.simlog import _send
+
     try:
         log.close()
     except LogError as exc:
@@ -95,8 +103,7 @@ def main() -> int:
         if error is not None:
             _send(out, ("error", error))
             return 1
-        _send(out, ("done", {"messages": log.message_count, "flights": log.flight_count,
-                             "bytes": os.path.getsize(path)}))
+        _send(out, ("done", {"messages": log.message_count, "bytes": os.path.getsize(path), **stats}))
     except (BrokenPipeError, OSError):
         return 1  # nobody is listening any more; the file is finished anyway
     return 0
@@ -106,7 +113,7 @@ def _flight(log, path: str, inp, out) -> int:
     """Write a flight's items until ("close",) or the end of stdin (the ground station died)."""
     from gcs.errors import LogError
     from gcs.log.flightlog import FlightItemWriter
-    from gcs.log.simlog import _recv, _send
+    from gcs.log.simlog import _recv
 
     writer = FlightItemWriter(log)
     error = None
@@ -129,19 +136,7 @@ def _flight(log, path: str, inp, out) -> int:
         error = str(exc)
     except Exception as exc:  # a process boundary: report any failure, then finish the file
         error = f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"
-    try:
-        log.close()
-    except LogError as exc:
-        error = error or str(exc)
-    try:
-        if error is not None:
-            _send(out, ("error", error))
-            return 1
-        _send(out, ("done", {"messages": log.message_count, "bytes": os.path.getsize(path),
-                             "undecodable": writer.undecodable}))
-    except (BrokenPipeError, OSError):
-        return 1
-    return 0
+    return _close(log, path, out, error, undecodable=writer.undecodable)
 
 
 if __name__ == "__main__":
