@@ -150,7 +150,8 @@ def write_outputs(out: Path, plan: Plan, results: Sequence[RunResult], campaign_
         fig = draw_figures(results, out, workers=workers)
     files["figures"] = fig["files"]
     files["RESULTS.md"] = _write(out / "RESULTS.md",
-                                 results_markdown(campaign_doc, tables, agg, checks, opt_rows, fig, base=out))
+                                 results_markdown(campaign_doc, tables, agg, checks, opt_rows, fig, base=out,
+                                                  results=results))
     return files
 
 
@@ -203,9 +204,12 @@ def run_campaign(options: CampaignOptions, caps: FlyCapabilities, executor_facto
     doc["timing"] = {"runs": len(results), "wall_s": wall, "vehicle_s": vehicle,
                      "throughput": vehicle / wall if wall > 0 else 0.0, "executor": executor_name, "workers": workers,
                      "failed": sum(1 for r in results if not r.ok)}
-    files = {"campaign.json": _write(out / "campaign.json", _json(doc))}
-    files.update(write_outputs(out, plan, results, doc, figures=figures, horizons_s=horizons_s,
-                               workers=workers if executor_name == "local" else 1))
+    _write(out / "campaign.json", _json(doc))
+    t1 = time.monotonic()
+    files = write_outputs(out, plan, results, doc, figures=figures, horizons_s=horizons_s,
+                          workers=workers if executor_name == "local" else 1)
+    doc["timing"]["outputs_s"] = time.monotonic() - t1  # tables, optimality, figures, report
+    files["campaign.json"] = _write(out / "campaign.json", _json(doc))
     return CampaignResult(out, plan, tuple(results), wall, vehicle, files)
 
 

@@ -110,6 +110,11 @@ def _horizons(text: str) -> tuple[float, ...]:
 
 def _options(args: argparse.Namespace, out: str) -> CampaignOptions:
     ctls = tuple(c.strip() for c in args.controllers.split(",") if c.strip())
+    for c in ctls:
+        if c not in CONTROLLERS:
+            raise CampaignError("--controllers", "", f"unknown controller {c!r} (choose from {', '.join(CONTROLLERS)})")
+    if not ctls:
+        raise CampaignError("--controllers", "", "no controller given")
     return CampaignOptions(experiments=tuple(args.experiment.split(",")), runs=args.runs, seed=args.seed, out=out,
                            controllers=ctls, durations=parse_durations(args.duration),
                            duration_scale=args.duration_scale,
@@ -161,7 +166,7 @@ def cmd_campaign(args: argparse.Namespace, argv: list[str] | None = None) -> int
     if args.optimality_only:
         exps = [e.name for e in resolve_experiments(options.experiments)]
         Path(out).mkdir(parents=True, exist_ok=True)
-        rows, files = write_optimality(Path(out), exps, horizons, options.controllers or CONTROLLERS)
+        rows, files = write_optimality(Path(out), exps, horizons, options.controllers)
         if not files:
             raise CampaignError("--experiment", "", "none of these experiments has an optimality table "
                                 "(indoor-4dof and outdoor-altitude do)")
@@ -195,6 +200,10 @@ def cmd_campaign(args: argparse.Namespace, argv: list[str] | None = None) -> int
     for r in result.failed:
         print(f"gcs campaign: failed run {r.key}: {r.status}" + (f" ({r.detail})" if r.detail else "")
               + f"; output {r.output_path}", file=sys.stderr)
+    late = [r for r in result.results if r.ok and r.lockstep_timeouts]
+    if late:
+        print(f"gcs campaign: warning: {len(late)} run(s) had lockstep telemetry timeouts (e.g. {late[0].key}): "
+              "their numbers depend on machine load; see RESULTS.md, Reproducibility", file=sys.stderr)
     if args.results:
         copy_results(Path(result.files["RESULTS.md"]), args.results)
     print(f"{len(result.results)} flights ({len(result.failed)} failed) in {result.wall_s:.1f} s on {workers} "

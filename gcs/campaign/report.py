@@ -16,7 +16,7 @@ from gcs.campaign.optimality import format_optimality_markdown
 from gcs.campaign.tables import format_tables_markdown
 from gcs.campaign.trends import format_trends_markdown
 
-__all__ = ["results_markdown", "EXPLANATION"]
+__all__ = ["results_markdown", "reproducibility_markdown", "EXPLANATION"]
 
 EXPLANATION = """\
 - **PD and LOC behave alike.** The eq. 26 PD gains are almost LOC's converged gains (z: 42/35
@@ -44,8 +44,36 @@ def _rel(path: str, base: Path) -> str:
         return path
 
 
+def reproducibility_markdown(results: Sequence) -> str:
+    """Whether the runs can have depended on wall time: lockstep timeouts, and arming times
+    that differ between the controllers of one run (preflight is the same for all of them)."""
+    ok = [r for r in results if r.ok]
+    if not ok:
+        return "No completed run."
+    lines = []
+    late = [r for r in ok if r.lockstep_timeouts]
+    if late:
+        lines.append(f"{len(late)} of {len(ok)} completed runs went on without the vehicle's step at least once "
+                     "(lockstep telemetry timeouts: " +
+                     ", ".join(f"{r.key} {r.lockstep_timeouts}" for r in late[:12]) + (", ..." if len(late) > 12 else "")
+                     + "): their numbers depend on how busy the machine was, not only on the seed.")
+    groups: dict = {}
+    for r in ok:
+        if r.armed_s is not None:
+            groups.setdefault((r.experiment, r.run), set()).add(round(r.armed_s, 6))
+    odd = sorted(f"{e} run {i}" for (e, i), times in groups.items() if len(times) > 1)
+    if odd:
+        lines.append(f"Arming happened at different vehicle times for the controllers of {len(odd)} run(s) "
+                     f"({', '.join(odd[:8])}{', ...' if len(odd) > 8 else ''}): preflight depended on wall time.")
+    if not lines:
+        lines.append(f"Every completed run ({len(ok)}) stepped in lockstep without a timeout, and the controllers of "
+                     "each run armed at the same vehicle time: the numbers are a function of the seed.")
+    return " ".join(lines)
+
+
 def results_markdown(campaign: dict, tables: list[dict], agg: dict, checks: list[dict],
-                     optimality: Sequence[dict] | None, figures: dict | None, *, base: str | Path = ".") -> str:
+                     optimality: Sequence[dict] | None, figures: dict | None, *, base: str | Path = ".",
+                     results: Sequence | None = None) -> str:
     """The text of RESULTS.md.
 
     Parameters
@@ -64,6 +92,8 @@ def results_markdown(campaign: dict, tables: list[dict], agg: dict, checks: list
         :func:`gcs.campaign.figures.draw_figures`.
     base : path
         Folder that file paths are shown relative to (the campaign's output folder).
+    results : sequence of RunResult or None
+        For the reproducibility section.
     """
     base = Path(base)
     plan = campaign["plan"]
@@ -118,6 +148,8 @@ def results_markdown(campaign: dict, tables: list[dict], agg: dict, checks: list
         out.append("")
     else:
         out += ["None: every run completed.", ""]
+
+    out += ["## Reproducibility", "", reproducibility_markdown(results or ()), ""]
 
     out += ["## Figures", ""]
     if figures and figures.get("files"):

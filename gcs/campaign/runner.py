@@ -75,6 +75,13 @@ class RunResult:
         Why it failed (the last line of its output, the exception, ...); "" when ok.
     output_path, summary_path : str
     log_path : str or None
+    lockstep_timeouts : int
+        Ticks where the lockstep loop stopped waiting for the vehicle's step and went on
+        without it (the summary's ``loop.telemetry_timeouts``): such a run depends on how
+        busy the machine was, not only on its seed.
+    armed_s : float or None
+        Vehicle time of arming (the summary's ``arming`` event): the same for every
+        controller of a run when preflight is reproducible.
     """
 
     key: str
@@ -92,6 +99,8 @@ class RunResult:
     output_path: str = ""
     summary_path: str = ""
     log_path: str | None = None
+    lockstep_timeouts: int = 0
+    armed_s: float | None = None
 
     @property
     def ok(self) -> bool:
@@ -143,23 +152,36 @@ def _redirected(path: str) -> Iterator[Any]:
                 os.close(copy)
 
 
-@contextlib.contextmanager
-def _deadline(seconds: float) -> Iterator[None]:
-    """Raise :class:`RunTimeout` after ``seconds`` of wall time (main thread only; elsewhere no deadline)."""
-    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "setitimer"):
-        yield
-        return
+class _Deadline:
+    """Raise :class:`RunTimeout` ``seconds`` of wall time after entering, unless :meth:`disarm`
+    was called first (so a flight that returned just before the deadline still counts).
+    Main thread only; elsewhere (no signals) there is no deadline."""
 
-    def fire(signum, frame) -> None:  # noqa: ARG001
-        raise RunTimeout(f"no result after {seconds:g} s")
+    def __init__(self, seconds: float) -> None:
+        self.seconds = seconds
+        self.armed = False
+        self._old = None
 
-    old = signal.signal(signal.SIGALRM, fire)
-    signal.setitimer(signal.ITIMER_REAL, max(seconds, 1e-3))
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, old)
+    def _fire(self, signum, frame) -> None:  # noqa: ARG002
+        if self.armed:
+            self.armed = False
+            raise RunTimeout(f"no result after {self.seconds:g} s")
+
+    def disarm(self) -> None:
+        self.armed = False
+
+    def __enter__(self) -> "_Deadline":
+        if threading.current_thread() is threading.main_thread() and hasattr(signal, "setitimer"):
+            self._old = signal.signal(signal.SIGALRM, self._fire)
+            self.armed = True
+            signal.setitimer(signal.ITIMER_REAL, max(self.seconds, 1e-3))
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.armed = False
+        if self._old is not None:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+            signal.signal(signal.SIGALRM, self._old)
 
 
 def _last_line(path: str) -> str:
@@ -196,11 +218,12 @@ def run_job(job: Job) -> RunResult:
     status, code, detail = "ok", None, ""
     with _redirected(job.output_path) as out:
         try:
-            with _deadline(job.timeout_s):
+            with _Deadline(job.timeout_s) as deadline:
                 try:
                     code = _entry(job.entry)(list(job.argv))
                 except SystemExit as exc:  # argparse errors exit 2 from inside main()
                     code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+                deadline.disarm()
         except RunTimeout as exc:
             status, detail = "timeout", f"timed out: {exc}"
             print(f"[campaign] {detail}", file=out)
@@ -224,7 +247,19 @@ def run_job(job: Job) -> RunResult:
     log = job.log_path if job.log_path and os.path.exists(job.log_path) else None
     return RunResult(job.key, job.experiment, job.controller, job.run, job.disturbances.seed, "ok", code,
                      summary.get("exit_reason"), metrics, float(summary.get("duration_s", 0.0)), wall, "",
-                     job.output_path, job.summary_path, log)
+                     job.output_path, job.summary_path, log, *_reproducibility(summary))
+
+
+def _reproducibility(summary: dict) -> tuple[int, float | None]:
+    """``(lockstep timeouts, arming time [s])`` from a summary (see :class:`RunResult`)."""
+    loop = summary.get("loop") or {}
+    timeouts = loop.get("telemetry_timeouts", 0)
+    armed = None
+    for e in summary.get("events") or []:
+        if isinstance(e, dict) and e.get("kind") == "arming" and e.get("text") == "armed":
+            armed = e.get("t_ns", 0) / 1e9
+            break
+    return (int(timeouts) if isinstance(timeouts, (int, float)) else 0), armed
 
 
 # --------------------------------------------------------------------------- child interpreter
