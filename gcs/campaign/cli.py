@@ -160,7 +160,8 @@ def cmd_campaign(args: argparse.Namespace, argv: list[str] | None = None) -> int
     from gcs.campaign.flyopts import fly_capabilities
     from gcs.campaign.plan import resolve_experiments
 
-    out = args.out or str(Path("campaigns") / utc_stamp())
+    # Absolute: the workers (a remote Dask worker too) write the runs' files there.
+    out = str(Path(args.out or Path("campaigns") / utc_stamp()).absolute())
     horizons = _horizons(args.horizons)
     options = _options(args, out)
     if args.optimality_only:
