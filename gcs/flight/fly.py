@@ -122,7 +122,7 @@ class Flight(FlightLoop):
         """One level setpoint and one control period of waiting.
 
         In real time: 10 ms of wall time.  In lockstep the setpoint moves the vehicle one
-        period; the next one goes only when its telemetry is back (or after 50 ms), so a
+        period; the next one goes only when its telemetry is back (or after 0.5 s), so a
         slow serial link is never flooded with steps it cannot report.
         """
         if self.adapter is None:
@@ -132,9 +132,10 @@ class Flight(FlightLoop):
         self._send_level(thrust_n)
         wait = 0.01
         if self.lockstep:
-            # Wait for the step's telemetry, unless the telemetry is gone (failsafe): then keep
-            # the vehicle's time moving so that it can land by itself.
-            wait = 0.05 if time.monotonic() - self._last_rx_wall < 0.5 else 0.005
+            # Wait for the step's telemetry (long enough for a simulator starved of CPU: the same
+            # seed gives the same flight), unless the telemetry is gone (failsafe): then keep the
+            # vehicle's time moving so that it can land by itself.
+            wait = 0.5 if time.monotonic() - self._last_rx_wall < 0.5 else 0.005
         end = time.monotonic() + wait
         while True:
             remaining = end - time.monotonic()

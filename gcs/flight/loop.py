@@ -121,22 +121,29 @@ class VehicleClock:
     pump : callable (wait_s)
         Receive from the link, waiting at most ``wait_s`` when nothing is there.
     max_wait_s : float
-        Wall time to wait for a step's telemetry.
+        Wall time to wait for a step's telemetry before giving up on it.
+    lost_wait_s : float
+        The same after a step whose telemetry never came, until telemetry comes again.
 
     After :meth:`mark_sent`, ``sleep_until_ns`` pumps the link until telemetry newer
     than the command has arrived (the vehicle steps once per command; an absolute time
-    would never be reached after a lost frame); if none comes within ``max_wait_s`` of
-    wall time the clock moves to the deadline anyway, so a silent vehicle still ages the
-    telemetry and trips the failsafe.
+    would never be reached after a lost frame).  Wall time enters only when that telemetry
+    does not come: after ``max_wait_s`` (long enough that a simulator starved of CPU is
+    waited for, so the same seed gives the same flight) the clock moves to the deadline
+    anyway, and while nothing comes back each step waits only ``lost_wait_s`` — a silent
+    vehicle still ages the telemetry quickly and trips the failsafe.  :attr:`timeouts`
+    counts the steps given up on (a flight with none did not depend on wall time).
     """
 
     def __init__(self, vehicle_time_ns: Callable[[], int], pump: Callable[[float], None],
-                 max_wait_s: float = 0.05) -> None:
+                 max_wait_s: float = 0.5, lost_wait_s: float = 0.05) -> None:
         self.vehicle_time_ns = vehicle_time_ns
         self.pump = pump
         self.max_wait_s = max_wait_s
+        self.lost_wait_s = lost_wait_s
         self._virtual_ns = 0
         self._sent_ns: int | None = None
+        self._lost = False
         self.timeouts = 0
 
     def now_ns(self) -> int:
@@ -148,13 +155,16 @@ class VehicleClock:
 
     def sleep_until_ns(self, deadline_ns: int) -> None:
         sent = self._sent_ns
-        end = time.monotonic() + self.max_wait_s
+        end = time.monotonic() + (self.lost_wait_s if self._lost else self.max_wait_s)
         while (self.vehicle_time_ns() <= sent) if sent is not None else (self.now_ns() < deadline_ns):
             remaining = end - time.monotonic()
             if remaining <= 0:
                 self.timeouts += 1
+                self._lost = True
                 break
             self.pump(min(remaining, 0.005))
+        else:
+            self._lost = False
         self._virtual_ns = max(self._virtual_ns, deadline_ns)
 
 
@@ -487,6 +497,8 @@ class FlightLoop:
         loop["realtime_ratio"] = len(cmds) * e.ts_s / wall_s if wall_s > 0 else 0.0
         if isinstance(self.clock, VehicleClock):
             loop["telemetry_timeouts"] = self.clock.timeouts
-        return FlightResult(self.controller_name, self.config.source, reason, len(cmds) * e.ts_s, metrics,
+        loop["flown_s"] = len(cmds) * e.ts_s  # with a descent flown after the mission
+        return FlightResult(self.controller_name, self.config.source, reason,
+                            min(len(cmds), mission_steps) * e.ts_s, metrics,
                             loop, self.events, self._link_summary(), record,
                             None if rec.path is None else str(rec.path))

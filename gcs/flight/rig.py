@@ -164,6 +164,19 @@ class RigFlight(FlightLoop):
         cmd = self.envelope.level(s, thrust_n)
         self._control_frame(cmd.thrust_n, cmd.roll_accel_rad_s2, cmd.pitch_accel_rad_s2, 0.0)
 
+    def _step_idle(self, thrust_n: float, *, level: bool = False) -> None:
+        """One control frame outside the mission loop (level at ``thrust_n``, or all zero) and one
+        control period: in lockstep until the step's telemetry is back (at most 0.5 s of wall time),
+        in real time 10 ms."""
+        before = self._time_ns
+        if level:
+            self._level(thrust_n)
+        else:
+            self._control_frame(thrust_n, 0.0, 0.0, 0.0)
+        wait_end = time.monotonic() + (0.5 if self.lockstep else 0.01)
+        while time.monotonic() < wait_end and not (self.lockstep and self._time_ns > before):
+            self._pump_wait(0.005)
+
     def _check_interrupt(self) -> None:
         if self.interrupts.count:
             raise PreflightRefused("interrupted before arming")
@@ -209,8 +222,9 @@ class RigFlight(FlightLoop):
         while time.monotonic() < end:
             self._check_interrupt()
             if self.lockstep:
-                self._control_frame(0.0, 0.0, 0.0, 0.0)
-            self._pump_wait(0.02)
+                self._step_idle(0.0)  # one step, and its telemetry (not wall time: same seed, same flight)
+            else:
+                self._pump_wait(0.02)
             if self.estimator.initialised and self._fresh(self.now_ns(), fc.telemetry_stale_s):
                 first_ns = self._time_ns if first_ns is None else first_ns
                 if self._time_ns - first_ns >= 500_000_000:
@@ -269,11 +283,7 @@ class RigFlight(FlightLoop):
                 next_hb += 1.0
                 self._heartbeat()
             if level_thrust_n is not None:
-                before = self._time_ns
-                self._level(level_thrust_n)
-                wait_end = time.monotonic() + (0.05 if self.lockstep else 0.01)
-                while time.monotonic() < wait_end and not (self.lockstep and self._time_ns > before):
-                    self._pump_wait(0.005)
+                self._step_idle(level_thrust_n, level=True)
             else:
                 self._pump_wait(0.01)
         return predicate()
