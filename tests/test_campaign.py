@@ -16,18 +16,12 @@ import pytest
 
 from gcs.campaign.errors import CampaignError
 from gcs.campaign.executors import LocalExecutor
-from gcs.campaign.flyopts import FlyCapabilities
 from gcs.campaign.plan import (EXPERIMENTS, CampaignOptions, DisturbanceModel, draw_disturbances, parse_durations,
                                plan_campaign)
 from gcs.cli import main
 from gcs.control import CONTROLLERS
 from gcs.metrics import METRICS
 
-CAPS = FlyCapabilities()
-NO_RIG = pytest.mark.skipif(not CAPS.rig, reason="gcs fly has no --rig option yet: the indoor 4-DOF rig cannot be "
-                                                 "flown through gcs fly (remove this skip once it has)")
-NEEDS_FLY_OPTIONS = pytest.mark.skipif(not (CAPS.log and CAPS.duration),
-                                       reason="gcs fly lacks --log/--duration: no short test missions")
 SHORT = "6"  # mission seconds per test flight (then gcs fly lands)
 OUTDOOR = ("outdoor-altitude", "outdoor-circle")
 
@@ -40,9 +34,7 @@ def _campaign(capsys, *args: str) -> tuple[int, str, str]:
 
 @pytest.fixture(scope="module")
 def small_campaign(tmp_path_factory) -> Path:
-    """``gcs campaign --experiment all --runs 2`` with short missions (indoor skipped while gcs fly has no --rig)."""
-    if not (CAPS.log and CAPS.duration):
-        pytest.skip("gcs fly lacks --log/--duration")
+    """``gcs campaign --experiment all --runs 2`` with short missions."""
     out = tmp_path_factory.mktemp("campaign") / "all"
     code = main(["campaign", "--experiment", "all", "--runs", "2", "--duration", SHORT, "--workers", "2",
                  "--seed", "3", "--out", str(out), "--horizons", "1,5", "-q",
@@ -69,8 +61,7 @@ def test_draws_are_a_pure_function_of_seed_experiment_and_run():
 
 
 def test_every_controller_meets_the_same_disturbances(tmp_path):
-    caps = FlyCapabilities({"--log", "--duration", "--rig"})
-    plan = plan_campaign(CampaignOptions(("all",), 3, 11, str(tmp_path)), caps)
+    plan = plan_campaign(CampaignOptions(("all",), 3, 11, str(tmp_path)))
     assert len(plan.jobs) == 3 * 3 * len(CONTROLLERS)
     for exp in EXPERIMENTS:
         for run in range(3):
@@ -79,7 +70,7 @@ def test_every_controller_meets_the_same_disturbances(tmp_path):
             assert len({j.disturbances for j in jobs}) == 1
             strip = [tuple(a for a in j.argv if a not in CONTROLLERS and str(tmp_path) not in a) for j in jobs]
             assert len(set(strip)) == 1, strip                    # the command lines differ in the controller only
-    assert plan == plan_campaign(CampaignOptions(("all",), 3, 11, str(tmp_path)), caps)
+    assert plan == plan_campaign(CampaignOptions(("all",), 3, 11, str(tmp_path)))
     indoor = next(j for j in plan.jobs if j.experiment == "indoor-4dof")
     assert indoor.argv[:3] == ("fly", "--rig", "4dof") and not any(a.startswith("--sitl-arg") for a in indoor.argv)
     alt = next(j for j in plan.jobs if j.experiment == "outdoor-altitude")
@@ -87,16 +78,6 @@ def test_every_controller_meets_the_same_disturbances(tmp_path):
     circle = next(j for j in plan.jobs if j.experiment == "outdoor-circle")
     assert "--duration" not in circle.argv                    # the whole 60 s mission
     assert {"--sitl", "lockstep"} <= set(circle.argv) and "-q" in circle.argv and "--log" in circle.argv
-
-
-def test_plan_without_the_new_fly_options(tmp_path):
-    old = FlyCapabilities({"--summary", "--seed", "--sitl", "--sitl-arg", "-q"})
-    plan = plan_campaign(CampaignOptions(("all",), 1, 1, str(tmp_path)), old)
-    assert "indoor-4dof" in plan.skipped and "--rig" in plan.skipped["indoor-4dof"]
-    assert all(j.log_path is None and "--log" not in j.argv and "--duration" not in j.argv for j in plan.jobs)
-    assert any("--log" in n for n in plan.notes) and any("--duration" in n for n in plan.notes)
-    with pytest.raises(CampaignError, match="--rig"):
-        plan_campaign(CampaignOptions(("indoor-4dof",), 1, 1, str(tmp_path)), old)
 
 
 def test_parse_durations():
@@ -149,21 +130,19 @@ def test_optimality_only(capsys, tmp_path):
 
 
 # --------------------------------------------------------------------------- flights
-@NEEDS_FLY_OPTIONS
 def test_small_campaign_end_to_end(small_campaign):
     out = small_campaign
     runs = json.loads((out / "runs.json").read_text())
-    flown = [e for e in EXPERIMENTS if CAPS.rig or EXPERIMENTS[e].rig is None]
+    flown = list(EXPERIMENTS)
     assert len(runs) == len(flown) * 2 * len(CONTROLLERS)
     assert all(r["status"] == "ok" and r["exit_code"] == 0 for r in runs), [r["detail"] for r in runs]
     for r in runs:
         assert Path(r["log_path"]).stat().st_size > 0 and Path(r["summary_path"]).exists()
         assert Path(r["output_path"]).exists()
-        if r["experiment"] != "indoor-4dof":                  # the rig counts its descent in the flight
-            assert r["flown_s"] == pytest.approx(float(SHORT))
+        assert r["flown_s"] == pytest.approx(float(SHORT))
     tables = json.loads((out / "tables.json").read_text())
     numbers = {t["number"] for t in tables["tables"]}
-    assert {2, 3, 4, 5} <= numbers and ((1 in numbers) == CAPS.rig)
+    assert {1, 2, 3, 4, 5} <= numbers
     for exp in flown:
         block = tables["aggregate"]["experiments"][exp]["controllers"]
         for ctl in CONTROLLERS:
@@ -185,7 +164,6 @@ def test_small_campaign_end_to_end(small_campaign):
     assert {r["experiment"] for r in opt["rows"]} == {"indoor-4dof", "outdoor-altitude"}
 
 
-@NEEDS_FLY_OPTIONS
 def test_results_md_generated(small_campaign):
     out = small_campaign
     text = (out / "RESULTS.md").read_text()
@@ -206,19 +184,22 @@ def test_results_md_generated(small_campaign):
     assert "None: every run completed." in text
 
 
-@NEEDS_FLY_OPTIONS
 def test_same_seed_same_tables(small_campaign, tmp_path):
-    """A second campaign with the same seed, on a subset: its numbers equal the first's, so every
-    run's draws depend on (seed, experiment, run) only."""
+    """A second campaign with the same seed, run 0 of every experiment (the rig included): each
+    flight's numbers equal the first campaign's — the draws depend on (seed, experiment, run)
+    only and lockstep flights do not depend on wall time."""
     out = tmp_path / "again"
-    assert main(["campaign", "--experiment", "outdoor-circle", "--runs", "2", "--controllers", "loc,nlsoc",
-                 "--duration", SHORT, "--workers", "2", "--seed", "3", "--out", str(out), "--no-figures", "-q"]) == 0
-    first = json.loads((small_campaign / "tables.json").read_text())["aggregate"]["experiments"]["outdoor-circle"]
-    again = json.loads((out / "tables.json").read_text())["aggregate"]["experiments"]["outdoor-circle"]
-    assert again["controllers"] == {c: first["controllers"][c] for c in ("loc", "nlsoc")}
+    assert main(["campaign", "--experiment", "all", "--runs", "1", "--controllers", "loc,nlsoc",
+                 "--duration", SHORT, "--workers", "2", "--seed", "3", "--out", str(out), "--no-figures", "-q",
+                 "--horizons", "1"]) == 0
+    key = lambda r: (r["experiment"], r["controller"], r["run"])
+    first = {key(r): r for r in json.loads((small_campaign / "runs.json").read_text())}
+    again = json.loads((out / "runs.json").read_text())
+    assert len(again) == 3 * 2
+    for r in again:
+        assert r["metrics"] == first[key(r)]["metrics"], key(r)
 
 
-@NEEDS_FLY_OPTIONS
 def test_dask_and_local_give_identical_tables(small_campaign, tmp_path):
     """The fixture's campaign ran on the local pool; the same campaign (two of its controllers) on a
     local Dask cluster of two worker processes gives the same tables."""
@@ -257,7 +238,6 @@ FAULTS = textwrap.dedent("""
 """)
 
 
-@NEEDS_FLY_OPTIONS
 def test_failed_runs_are_reported_and_the_rest_complete(tmp_path, monkeypatch):
     from gcs.campaign.campaign import execute, write_outputs
 
@@ -266,7 +246,7 @@ def test_failed_runs_are_reported_and_the_rest_complete(tmp_path, monkeypatch):
     monkeypatch.setenv("PYTHONPATH", str(tmp_path / "faults"))
     out = tmp_path / "out"
     plan = plan_campaign(CampaignOptions(("outdoor-circle",), 3, 2, str(out), controllers=("pd", "loc"),
-                                         durations={"*": 3.0}), CAPS)
+                                         durations={"*": 3.0}))
     jobs = list(plan.jobs)
     # run 0: pd flies with a bad option (exit 2); loc's worker dies.  run 1: pd hangs, loc raises.
     # run 2: pd ignores the deadline signal (killed by the pool), loc flies normally.
@@ -301,7 +281,6 @@ def test_failed_runs_are_reported_and_the_rest_complete(tmp_path, monkeypatch):
             assert f"| {key} | {s} |" in report
 
 
-@NEEDS_FLY_OPTIONS
 def test_cli_failed_flights_exit_1_and_are_listed(capsys, tmp_path):
     code, out, err = _campaign(capsys, "--experiment", "outdoor-circle", "--runs", "1", "--controllers", "pd",
                                "--duration", "2", "--workers", "1", "--fly-arg=--output=bogus", "--no-figures",
@@ -311,8 +290,6 @@ def test_cli_failed_flights_exit_1_and_are_listed(capsys, tmp_path):
     assert "| outdoor-circle/pd/run00 | failed | 2 |" in (tmp_path / "RESULTS.md").read_text()
 
 
-@NO_RIG
-@NEEDS_FLY_OPTIONS
 def test_indoor_campaign(small_campaign):
     """The fixture's campaign flew the indoor rig too (``gcs fly --rig 4dof``): Table 1."""
     tables = json.loads((small_campaign / "tables.json").read_text())

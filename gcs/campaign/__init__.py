@@ -6,8 +6,6 @@ Modules, one job each:
   function of campaign seed, experiment and run index: the same for every controller)
   and one :class:`~gcs.campaign.plan.Job` (a ``gcs fly --sitl lockstep`` command line)
   per flight;
-* :mod:`gcs.campaign.flyopts`: which options this ``gcs fly`` has (``--log``,
-  ``--duration``, ``--rig``);
 * :mod:`gcs.campaign.runner`: one flight, ``gcs.cli.main(argv)`` in a worker process with
   its output in a file and a deadline; its summary read back;
 * :mod:`gcs.campaign.executors`: the executor interface, a local process pool and a Dask

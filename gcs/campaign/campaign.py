@@ -28,7 +28,6 @@ from typing import Callable, Sequence
 
 from gcs.campaign.errors import CampaignError
 from gcs.campaign.executors import Executor
-from gcs.campaign.flyopts import FlyCapabilities
 from gcs.campaign.plan import EXPERIMENTS, CampaignOptions, Plan, plan_campaign, resolve_experiments
 from gcs.campaign.runner import RunResult
 
@@ -155,7 +154,7 @@ def write_outputs(out: Path, plan: Plan, results: Sequence[RunResult], campaign_
     return files
 
 
-def run_campaign(options: CampaignOptions, caps: FlyCapabilities, executor_factory: Callable[[], Executor], *,
+def run_campaign(options: CampaignOptions, executor_factory: Callable[[], Executor], *,
                  command: str = "", progress: Callable[[RunResult], None] | None = None,
                  on_plan: Callable[[Plan], None] | None = None, figures: bool = True,
                  horizons_s: Sequence[float] | None = None, executor_name: str = "local",
@@ -165,7 +164,6 @@ def run_campaign(options: CampaignOptions, caps: FlyCapabilities, executor_facto
     Parameters
     ----------
     options : CampaignOptions
-    caps : FlyCapabilities
     executor_factory : callable
         Makes the :class:`Executor` (called after planning, so a bad option fails fast).
     command : str
@@ -185,7 +183,7 @@ def run_campaign(options: CampaignOptions, caps: FlyCapabilities, executor_facto
     -------
     CampaignResult
     """
-    plan = plan_campaign(options, caps)
+    plan = plan_campaign(options)
     out = Path(options.out)
     try:
         out.mkdir(parents=True, exist_ok=True)

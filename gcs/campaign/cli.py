@@ -157,7 +157,6 @@ def cmd_campaign(args: argparse.Namespace, argv: list[str] | None = None) -> int
     """
     from gcs.campaign.campaign import command_line, copy_results, run_campaign, utc_stamp, write_optimality
     from gcs.campaign.executors import make_executor
-    from gcs.campaign.flyopts import fly_capabilities
     from gcs.campaign.plan import resolve_experiments
 
     # Absolute: the workers (a remote Dask worker too) write the runs' files there.
@@ -183,9 +182,8 @@ def cmd_campaign(args: argparse.Namespace, argv: list[str] | None = None) -> int
         from gcs.campaign.executors import _distributed
         _distributed()  # fail before flying anything when Dask is missing
     progress = _Progress(not args.quiet and sys.stderr.isatty())
-    caps = fly_capabilities()
     try:
-        result = run_campaign(options, caps, lambda: make_executor(args.executor, workers, args.scheduler),
+        result = run_campaign(options, lambda: make_executor(args.executor, workers, args.scheduler),
                               command=command_line(argv) if argv else "",
                               progress=progress, on_plan=progress.start, figures=not args.no_figures,
                               horizons_s=horizons, executor_name=args.executor, workers=workers)

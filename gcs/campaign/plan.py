@@ -4,7 +4,7 @@ Everything here is a pure function of its arguments: :func:`draw_disturbances` o
 ``(campaign seed, experiment, run index)`` only (never of the controller, so every
 controller meets the same wind, sensor noise and initial attitude in run ``i``, as in
 ``gcs sim``), and :func:`plan_campaign` of the options and of what ``gcs fly`` offers
-(:class:`gcs.campaign.flyopts.FlyCapabilities`).
+.
 
 The disturbances of an outdoor run (the built-in MAVLink SITL):
 
@@ -31,7 +31,6 @@ from typing import Sequence
 import numpy as np
 
 from gcs.campaign.errors import CampaignError
-from gcs.campaign.flyopts import FlyCapabilities
 from gcs.control import CONTROLLERS
 
 __all__ = ["ExperimentSpec", "EXPERIMENTS", "EXPERIMENT_CHOICES", "Disturbances", "DisturbanceModel",
@@ -301,7 +300,7 @@ class Plan:
     durations_s : dict
         Mission seconds per experiment flown.
     skipped : dict
-        Experiment name -> reason (e.g. ``gcs fly`` has no ``--rig``).
+        Experiment name -> reason (none are skipped today; kept for the report's format).
     notes : tuple of str
         Workarounds taken (no ``--log``: no figures; no ``--duration``: whole missions).
     """
@@ -362,14 +361,12 @@ def _mission_duration(config_name: str) -> tuple[float, tuple[float, float, floa
     return Mission(cfg.mission).duration_s, (w.mean_speed_m_s, w.gust_std_m_s, w.gust_tau_s)
 
 
-def plan_campaign(options: CampaignOptions, caps: FlyCapabilities) -> Plan:
+def plan_campaign(options: CampaignOptions) -> Plan:
     """The jobs of a campaign (pure: reads the bundled configs, writes nothing).
 
     Parameters
     ----------
     options : CampaignOptions
-    caps : FlyCapabilities
-        What ``gcs fly`` offers.
 
     Returns
     -------
@@ -378,8 +375,7 @@ def plan_campaign(options: CampaignOptions, caps: FlyCapabilities) -> Plan:
     Raises
     ------
     CampaignError
-        ``runs < 1``, a negative seed, an unknown controller or experiment, or only
-        experiments that this ``gcs fly`` cannot fly.
+        ``runs < 1``, a negative seed, an unknown controller or experiment.
     """
     if options.runs < 1:
         raise CampaignError("--runs", "", f"must be >= 1, got {options.runs}")
@@ -395,16 +391,7 @@ def plan_campaign(options: CampaignOptions, caps: FlyCapabilities) -> Plan:
     specs = resolve_experiments(options.experiments)
     skipped: dict[str, str] = {}
     notes: list[str] = []
-    flown: list[ExperimentSpec] = []
-    for spec in specs:
-        if spec.rig is not None and not caps.rig:
-            skipped[spec.name] = f"gcs fly has no --rig option yet (the {spec.rig} rig cannot be flown)"
-        else:
-            flown.append(spec)
-    if not flown:
-        raise CampaignError("--experiment", "", "; ".join(f"{k}: {v}" for k, v in skipped.items()))
-    if not caps.log:
-        notes.append("gcs fly has no --log option: no flight logs and no figures")
+    flown: list[ExperimentSpec] = list(specs)
     out = Path(options.out)
     durations = dict(options.durations or {})
     jobs: list[Job] = []
@@ -415,9 +402,6 @@ def plan_campaign(options: CampaignOptions, caps: FlyCapabilities) -> Plan:
         d = (mission_s if d is None else min(d, mission_s)) * options.duration_scale
         d = min(d, mission_s)
         cut = d < mission_s
-        if cut and not caps.duration:
-            notes.append(f"{spec.name}: gcs fly has no --duration option: flying the whole {mission_s:g} s mission")
-            d, cut = mission_s, False
         planned[spec.name] = d
         timeout = options.timeout_s if options.timeout_s is not None else default_timeout_s(d)
         for run in range(options.runs):
@@ -434,9 +418,8 @@ def plan_campaign(options: CampaignOptions, caps: FlyCapabilities) -> Plan:
                 if cut:
                     argv += ["--duration", _num(d)]
                 argv += ["--summary", str(base) + ".json"]
-                log = str(base) + ".mcap" if caps.log else None
-                if log is not None:
-                    argv += ["--log", log]
+                log = str(base) + ".mcap"
+                argv += ["--log", log]
                 argv += ["-q", *options.extra_fly_args]
                 jobs.append(Job(spec.name, ctl, run, dist, tuple(argv), str(base) + ".out", str(base) + ".json",
                                 log, d, timeout))
