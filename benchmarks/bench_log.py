@@ -1,6 +1,7 @@
 """MCAP logging cost (issue: logging and log review).
 
-Run: ``python benchmarks/bench_log.py [--quick] [--json]``.  Prints
+Run: ``python benchmarks/bench_log.py [--quick] [--json]`` (``--json``: the text on
+stderr, one JSON document on stdout, see ``benchlib.py``).  Prints
 
 * the logging cost of one control tick (``FlightLog.control_tick``): median over
   batches of the time per tick, for the 6-message tick (state, reference, error,
@@ -22,7 +23,6 @@ Run: ``python benchmarks/bench_log.py [--quick] [--json]``.  Prints
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import subprocess
@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchlib import document, emit, row
 from gcs.config import load_config
 from gcs.control import make_controller
 from gcs.log import FlightLog
@@ -282,37 +283,67 @@ def main(argv=None) -> int:
         n = make_flight_log(flight_path, altitude, minutes)
         out["flight_log_bytes_per_tick"] = flight_path.stat().st_size / n
         out["metrics_flight_log_s"], out["metrics_flight_log_cli_s"] = time_metrics(flight_path, repeats)
-    if args.json:
-        print(json.dumps(out))
-        return 0
+    lines = []
+    print_ = lines.append
     ok = lambda v, target: "ok" if v <= target else "MISSED"
-    print(f"python {sys.version.split()[0]}, {os.cpu_count()} CPU(s); medians")
-    print(f"log one control tick, 6 messages (state, reference, error, command, horizon, truth): "
-          f"{out['tick_6msg_median_us']:.1f} us ({out['tick_6msg_cpu_us']:.1f} us CPU)  (target <= {TARGET_TICK_US:g} us: "
-          f"{ok(out['tick_6msg_median_us'], TARGET_TICK_US)})")
-    print(f"log one flight-like tick, 13 messages (+ limited command, cost, timing, 3 MAVLink + raw): "
-          f"{out['tick_13msg_median_us']:.1f} us ({out['tick_13msg_cpu_us']:.1f} us CPU)")
-    print(f"gcs fly: logging one control tick (recorder -> writer process; 3 MAVLink frames + the tick): "
-          f"median {out['fly_log_back_to_back_median_us']:.1f} us back to back (p99 {out['fly_log_back_to_back_p99_us']:.0f}), "
-          f"{out['fly_log_paced_100hz_median_us']:.1f} us paced at 100 Hz (p99 {out['fly_log_paced_100hz_p99_us']:.0f}) "
-          f"(target <= {TARGET_TICK_US:g} us: {ok(out['fly_log_paced_100hz_median_us'], TARGET_TICK_US)}); "
-          f"baseline at 100 Hz: estimator + nlsoc step {out['paced_100hz_estimate_control_median_us']:.1f} us; "
-          f"records dropped {out['fly_log_back_to_back_dropped'] + out['fly_log_paced_100hz_dropped']}")
-    print(f"simulation x real time, outdoor-circle {sim_s:g} s nlsoc flight: no log "
-          f"{out['sim_realtime_ratio_none']:.0f}, log in-process {out['sim_realtime_ratio_inline']:.0f}, "
-          f"background writer {out['sim_realtime_ratio_background']:.0f}")
-    print(f"gcs sim-like run (outdoor-altitude, nlsoc + loc + pd, {out['sim_runs_flight_s']:g} s each): "
-          f"{out['sim_runs_wall_s_no_log']:.2f} s without log, "
-          f"{out['sim_runs_wall_s_background_log']:.2f} s with the background log "
-          f"(+{(out['sim_runs_wall_s_background_log'] / out['sim_runs_wall_s_no_log'] - 1) * 100:.0f} %)")
-    print(f"log size: {out['sim_log_bytes_per_tick']:.0f} B per simulated tick, "
-          f"{out['flight_log_bytes_per_tick']:.0f} B per flight-like tick (zstd)")
+    print_(f"python {sys.version.split()[0]}, {os.cpu_count()} CPU(s); medians")
+    print_(f"log one control tick, 6 messages (state, reference, error, command, horizon, truth): "
+           f"{out['tick_6msg_median_us']:.1f} us ({out['tick_6msg_cpu_us']:.1f} us CPU)  (target <= {TARGET_TICK_US:g} us: "
+           f"{ok(out['tick_6msg_median_us'], TARGET_TICK_US)})")
+    print_(f"log one flight-like tick, 13 messages (+ limited command, cost, timing, 3 MAVLink + raw): "
+           f"{out['tick_13msg_median_us']:.1f} us ({out['tick_13msg_cpu_us']:.1f} us CPU)")
+    print_(f"gcs fly: logging one control tick (recorder -> writer process; 3 MAVLink frames + the tick): "
+           f"median {out['fly_log_back_to_back_median_us']:.1f} us back to back (p99 {out['fly_log_back_to_back_p99_us']:.0f}), "
+           f"{out['fly_log_paced_100hz_median_us']:.1f} us paced at 100 Hz (p99 {out['fly_log_paced_100hz_p99_us']:.0f}) "
+           f"(target <= {TARGET_TICK_US:g} us: {ok(out['fly_log_paced_100hz_median_us'], TARGET_TICK_US)}); "
+           f"baseline at 100 Hz: estimator + nlsoc step {out['paced_100hz_estimate_control_median_us']:.1f} us; "
+           f"records dropped {out['fly_log_back_to_back_dropped'] + out['fly_log_paced_100hz_dropped']}")
+    print_(f"simulation x real time, outdoor-circle {sim_s:g} s nlsoc flight: no log "
+           f"{out['sim_realtime_ratio_none']:.0f}, log in-process {out['sim_realtime_ratio_inline']:.0f}, "
+           f"background writer {out['sim_realtime_ratio_background']:.0f}")
+    print_(f"gcs sim-like run (outdoor-altitude, nlsoc + loc + pd, {out['sim_runs_flight_s']:g} s each): "
+           f"{out['sim_runs_wall_s_no_log']:.2f} s without log, "
+           f"{out['sim_runs_wall_s_background_log']:.2f} s with the background log "
+           f"(+{(out['sim_runs_wall_s_background_log'] / out['sim_runs_wall_s_no_log'] - 1) * 100:.0f} %)")
+    print_(f"log size: {out['sim_log_bytes_per_tick']:.0f} B per simulated tick, "
+           f"{out['flight_log_bytes_per_tick']:.0f} B per flight-like tick (zstd)")
     for kind in ("sim", "flight"):
         lib, cli = out[f"metrics_{kind}_log_s"], out[f"metrics_{kind}_log_cli_s"]
-        print(f"gcs log metrics, {minutes:g}-minute 100 Hz {kind} log: {lib:.2f} s (library), {cli:.2f} s (command) "
-              f"(target <= {TARGET_METRICS_S:g} s: {ok(cli, TARGET_METRICS_S)})")
+        print_(f"gcs log metrics, {minutes:g}-minute 100 Hz {kind} log: {lib:.2f} s (library), {cli:.2f} s (command) "
+               f"(target <= {TARGET_METRICS_S:g} s: {ok(cli, TARGET_METRICS_S)})")
+    emit(document("log", args.quick, out, _rows(out, minutes)), "\n".join(lines), args.json)
     return 0
 
+
+def _rows(out: dict, minutes: float) -> list[dict]:
+    """The report's rows: each figure beside its baseline."""
+    rows = [
+        row("log one control tick, 6 messages (in-process FlightLog)", out["tick_6msg_median_us"], "us",
+            baseline="its CPU time", baseline_value=out["tick_6msg_cpu_us"], target=f"<= {TARGET_TICK_US:g} us",
+            met=out["tick_6msg_median_us"] <= TARGET_TICK_US),
+        row("gcs fly: log one tick, paced at 100 Hz", out["fly_log_paced_100hz_median_us"], "us",
+            baseline="estimator + nlsoc step, same pacing", baseline_value=out["paced_100hz_estimate_control_median_us"],
+            target=f"<= {TARGET_TICK_US:g} us", met=out["fly_log_paced_100hz_median_us"] <= TARGET_TICK_US,
+            note=f"p99 {out['fly_log_paced_100hz_p99_us']:.0f} us"),
+        row("gcs fly: log one tick, back to back", out["fly_log_back_to_back_median_us"], "us",
+            baseline="estimator + nlsoc step, paced", baseline_value=out["paced_100hz_estimate_control_median_us"],
+            note=f"dropped {out['fly_log_back_to_back_dropped'] + out['fly_log_paced_100hz_dropped']}"),
+        row("simulation with background log (x real time)", out["sim_realtime_ratio_background"], "x",
+            baseline="no log", baseline_value=out["sim_realtime_ratio_none"]),
+        row("simulation with in-process log (x real time)", out["sim_realtime_ratio_inline"], "x",
+            baseline="no log", baseline_value=out["sim_realtime_ratio_none"]),
+        row(f"gcs sim-like run, 3 x {out['sim_runs_flight_s']:g} s, background log", out["sim_runs_wall_s_background_log"],
+            "s", baseline="no log", baseline_value=out["sim_runs_wall_s_no_log"]),
+    ]
+    full = minutes >= 10.0
+    for kind in ("sim", "flight"):
+        cli = out[f"metrics_{kind}_log_cli_s"]
+        rows.append(row(f"gcs log metrics, {minutes:g}-minute {kind} log (command)", cli, "s",
+                        baseline="library call (no interpreter start)", baseline_value=out[f"metrics_{kind}_log_s"],
+                        target=f"<= {TARGET_METRICS_S:g} s (10-minute log)", met=(cli <= TARGET_METRICS_S) if full else None,
+                        note="" if full else f"--quick: not judged; x{10.0 / minutes:g} for 10 minutes: "
+                                             f"~{cli + (10.0 / minutes - 1) * out[f'metrics_{kind}_log_s']:.1f} s"))
+    return rows
 
 if __name__ == "__main__":
     sys.exit(main())

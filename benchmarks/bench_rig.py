@@ -2,7 +2,7 @@
 
 Run::
 
-    python benchmarks/bench_rig.py [--repeat N] [--quick]
+    python benchmarks/bench_rig.py [--repeat N] [--quick] [--json]
 
 Prints the median of ``N`` repetitions for:
 
@@ -17,7 +17,10 @@ Prints the median of ``N`` repetitions for:
 * ``emulator``: :class:`sitl.rig_firmware.RigFirmware` alone, simulated
   seconds per wall second;
 * ``lockstep``: a pyserial client stepping :class:`sitl.rig.RigServer` over a
-  pseudo-terminal in lockstep, unlimited and at 115200 baud, in steps per second.
+  pseudo-terminal in lockstep, unlimited and at 115200 baud, in steps per second
+  (baselines: the emulator alone, and the unlimited line).
+
+``--json``: the text on stderr, one JSON document on stdout (see ``benchlib.py``).
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ import time
 
 import serial
 
+from benchlib import document, emit, row
 from sitl import rig_protocol as rp
 from sitl.clock import MonotonicClock
 from sitl.radio import RadioParams
@@ -149,11 +153,12 @@ def bench_lockstep(steps: int, baud: int) -> float:
             port.close()
 
 
-def main() -> int:
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--quick", action="store_true", help="shorter runs")
-    args = ap.parse_args()
+    ap.add_argument("--json", action="store_true", help="text on stderr, one JSON document on stdout")
+    args = ap.parse_args(argv)
     repeat = 3 if args.quick else args.repeat
     seconds = 5.0 if args.quick else 20.0
     down, controls = hover_messages(seconds)
@@ -163,22 +168,39 @@ def main() -> int:
     steps = 100 if args.quick else 300
     ls_free = bench_lockstep(steps, 0)
     ls_baud = bench_lockstep(steps, BAUD)
-    print(f"rig protocol (median of {repeat}; {len(down)} frames, {codec['stream_bytes']} bytes of a "
-          f"{seconds:g} s emulated hover)")
-    print(f"  decode, 64-byte chunks   {codec['decode_64']:>10.0f} frames/s")
-    print(f"  decode, 64 kB blocks     {codec['decode_block']:>10.0f} frames/s")
-    print(f"  encode                   {codec['encode']:>10.0f} frames/s")
-    print(f"link budget at {BAUD} baud ({lb['line_Bps']:.0f} B/s each way, 10 bits/byte; mean escaped sizes)")
-    print(f"  down: TELEMETRY {lb['telemetry_b']:.2f} B x 200 Hz + STATUS {lb['status_b']:.1f} B x 1 Hz "
-          f"= {lb['down_Bps']:.0f} B/s = {100 * lb['down_share']:.1f} %")
-    print(f"  up:   CONTROL {lb['control_b']:.2f} B x 100 Hz + HEARTBEAT {lb['heartbeat_b']} B x 1 Hz "
-          f"= {lb['up_Bps']:.0f} B/s = {100 * lb['up_share']:.1f} %")
-    print(f"  up:   CONTROL_PWM {lb['pwm_b']:.2f} B x 100 Hz + HEARTBEAT "
-          f"= {lb['up_pwm_Bps']:.0f} B/s = {100 * lb['up_pwm_share']:.1f} %")
-    print(f"  busier direction: {100 * max(lb['down_share'], lb['up_share']):.1f} % of the line")
-    print(f"emulator (200 Hz loop, no link)  {emu:>8.1f} x real time")
-    print(f"lockstep over a pty, unlimited   {ls_free:>8.0f} steps/s ({ls_free / 100:.1f} x real time)")
-    print(f"lockstep over a pty, {BAUD} baud {ls_baud:>6.0f} steps/s ({ls_baud / 100:.2f} x real time)")
+    lines = [
+        f"rig protocol (median of {repeat}; {len(down)} frames, {codec['stream_bytes']} bytes of a "
+        f"{seconds:g} s emulated hover)",
+        f"  decode, 64-byte chunks   {codec['decode_64']:>10.0f} frames/s",
+        f"  decode, 64 kB blocks     {codec['decode_block']:>10.0f} frames/s",
+        f"  encode                   {codec['encode']:>10.0f} frames/s",
+        f"link budget at {BAUD} baud ({lb['line_Bps']:.0f} B/s each way, 10 bits/byte; mean escaped sizes)",
+        f"  down: TELEMETRY {lb['telemetry_b']:.2f} B x 200 Hz + STATUS {lb['status_b']:.1f} B x 1 Hz "
+        f"= {lb['down_Bps']:.0f} B/s = {100 * lb['down_share']:.1f} %",
+        f"  up:   CONTROL {lb['control_b']:.2f} B x 100 Hz + HEARTBEAT {lb['heartbeat_b']} B x 1 Hz "
+        f"= {lb['up_Bps']:.0f} B/s = {100 * lb['up_share']:.1f} %",
+        f"  up:   CONTROL_PWM {lb['pwm_b']:.2f} B x 100 Hz + HEARTBEAT "
+        f"= {lb['up_pwm_Bps']:.0f} B/s = {100 * lb['up_pwm_share']:.1f} %",
+        f"  busier direction: {100 * max(lb['down_share'], lb['up_share']):.1f} % of the line",
+        f"emulator (200 Hz loop, no link)  {emu:>8.1f} x real time",
+        f"lockstep over a pty, unlimited   {ls_free:>8.0f} steps/s ({ls_free / 100:.1f} x real time)",
+        f"lockstep over a pty, {BAUD} baud {ls_baud:>6.0f} steps/s ({ls_baud / 100:.2f} x real time)",
+    ]
+    data = {"frames": len(down), "codec": codec, "link_budget": lb, "emulator_ratio": emu,
+            "lockstep_steps_s_unlimited": ls_free, "lockstep_steps_s_baud": ls_baud, "baud": BAUD}
+    busier = max(lb["down_share"], lb["up_share"])
+    rows = [
+        row("rig TELEMETRY decode, 64-byte chunks", 1e6 / codec["decode_64"], "us/frame",
+            baseline="64 kB blocks", baseline_value=1e6 / codec["decode_block"]),
+        row("rig encode (TELEMETRY and STATUS frames)", 1e6 / codec["encode"], "us/frame"),
+        row(f"busier direction of the {BAUD}-baud line", 100 * busier, "%", target="< 100 %", met=busier < 1.0),
+        row("emulator alone (x real time)", emu, "x"),
+        row("lockstep over a pty, unlimited (x real time)", ls_free / 100, "x",
+            baseline="emulator alone", baseline_value=emu),
+        row(f"lockstep over a pty, {BAUD} baud (x real time)", ls_baud / 100, "x",
+            baseline="unlimited line", baseline_value=ls_free / 100),
+    ]
+    emit(document("rig", args.quick, data, rows), "\n".join(lines), args.json)
     return 0
 
 

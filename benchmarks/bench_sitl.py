@@ -2,7 +2,7 @@
 
 Run::
 
-    python benchmarks/bench_sitl.py [--repeat N] [--quick]
+    python benchmarks/bench_sitl.py [--repeat N] [--quick] [--json]
 
 Prints the median of ``N`` repetitions for:
 
@@ -15,7 +15,15 @@ Prints the median of ``N`` repetitions for:
 * ``...-1cpu``: the two lockstep cases with client and server pinned to one CPU
   (``os.sched_setaffinity``, like ``taskset -c 0``).  Lockstep is a ping-pong:
   on a VM, waking a thread on another CPU costs tens of microseconds per
-  message, so one CPU is the faster (and steadier) configuration for CI.
+  message, so one CPU is the faster (and steadier) configuration for CI;
+* ``in-process`` (the baseline of every lockstep case): the same kind of flight, a
+  climb and a hover over the same simulated time, flown by :func:`gcs.sim.simulate`
+  in one process with no link (outdoor-altitude config: takeoff ramp to 2 m and hold,
+  NLSOC, the reduced plant at 1 ms, sensors and estimator).  Each lockstep case is
+  reported as a ratio to it.  ``bench_fly.py`` compares a whole ``gcs fly --sitl
+  lockstep`` flight with :func:`gcs.sim.simulate` of exactly the same mission.
+
+``--json``: the text on stderr, one JSON document on stdout (see ``benchlib.py``).
 """
 
 from __future__ import annotations
@@ -28,6 +36,8 @@ import sys
 import time
 
 from pymavlink import mavutil
+
+from benchlib import document, emit, row
 
 from sitl import rigid_body
 from sitl.server import SitlServer
@@ -141,27 +151,64 @@ def pinned(fn):
     return run
 
 
-def main() -> int:
+def bench_in_process(sim_seconds: float) -> float:
+    """gcs.sim.simulate: a climb to 2 m and a hover, NLSOC, no link; simulated seconds per wall second."""
+    from gcs.config import load_config
+    from gcs.control import make_controller
+    from gcs.sim import SimOptions, simulate
+
+    config = load_config("outdoor-altitude")
+    designed = make_controller("nlsoc", config)  # designed once, outside the timing (as gcs sim does)
+    t0 = time.perf_counter()
+    simulate(config, "nlsoc", options=SimOptions(duration_s=sim_seconds), designed=designed)
+    return sim_seconds / (time.perf_counter() - t0)
+
+
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--repeat", type=int, default=5, help="repetitions (median reported)")
-    ap.add_argument("--quick", action="store_true", help="shorter runs")
-    args = ap.parse_args()
+    ap.add_argument("--repeat", type=int, default=None, help="repetitions (median reported; default 5, 3 with --quick)")
+    ap.add_argument("--quick", action="store_true", help="shorter runs, 3 repetitions")
+    ap.add_argument("--json", action="store_true", help="text on stderr, one JSON document on stdout")
+    args = ap.parse_args(argv)
+    repeat = args.repeat or (3 if args.quick else 5)
     scale = 0.25 if args.quick else 1.0
+    seconds = 20.0 * scale
     cases = [
-        ("physics", bench_physics, 20.0 * scale, 150.0),
-        ("simulation", bench_simulation, 20.0 * scale, None),
-        ("lockstep-thread", bench_lockstep_thread, 20.0 * scale, 30.0),
-        ("lockstep-process", bench_lockstep_process, 20.0 * scale, 30.0),
-        ("lockstep-thread-1cpu", pinned(bench_lockstep_thread), 20.0 * scale, 30.0),
-        ("lockstep-process-1cpu", pinned(bench_lockstep_process), 20.0 * scale, 30.0),
+        ("physics", bench_physics, 150.0),
+        ("simulation", bench_simulation, None),
+        ("in-process", bench_in_process, None),
+        ("lockstep-thread", bench_lockstep_thread, 30.0),
+        ("lockstep-process", bench_lockstep_process, 30.0),
+        ("lockstep-thread-1cpu", pinned(bench_lockstep_thread), 30.0),
+        ("lockstep-process-1cpu", pinned(bench_lockstep_process), 30.0),
     ]
-    print(f"{'benchmark':<22} {'median x RT':>11} {'min':>8} {'max':>8} {'target':>8} {'median/target':>14}")
-    for name, fn, seconds, target in cases:
-        vals = [fn(seconds) for _ in range(args.repeat)]
+    results = {}
+    lines = [f"{seconds:g} simulated s per run, median of {repeat}",
+             f"{'benchmark':<22} {'median x RT':>11} {'min':>8} {'max':>8} {'target':>8} {'median/target':>14} "
+             f"{'/in-process':>12}"]
+    if not args.json:
+        print("\n".join(lines), flush=True)
+    for name, fn, target in cases:
+        vals = [fn(seconds) for _ in range(repeat)]
         med = statistics.median(vals)
+        results[name] = {"median": med, "min": min(vals), "max": max(vals), "target": target}
         tgt = f"{target:.0f}x" if target else "-"
         ratio = f"{med / target:.2f}" if target else "-"
-        print(f"{name:<22} {med:>10.1f}x {min(vals):>7.1f}x {max(vals):>7.1f}x {tgt:>8} {ratio:>14}", flush=True)
+        base = f"{med / results['in-process']['median']:.2f}" if name.startswith("lockstep") else "-"
+        lines.append(f"{name:<22} {med:>10.1f}x {min(vals):>7.1f}x {max(vals):>7.1f}x {tgt:>8} {ratio:>14} {base:>12}")
+        if not args.json:
+            print(lines[-1], flush=True)
+    base = results["in-process"]["median"]
+    rows = []
+    for name, r in results.items():
+        lock = name.startswith("lockstep")
+        rows.append(row(f"{name} (x real time)", r["median"], "x",
+                        baseline="in-process gcs.sim.simulate" if lock else None, baseline_value=base if lock else None,
+                        target=f">= {r['target']:g}x" if r["target"] else None,
+                        met=(r["median"] >= r["target"]) if r["target"] else None))
+    doc = document("sitl", args.quick, {"sim_seconds": seconds, "repeat": repeat, "cases": results}, rows)
+    if args.json:
+        emit(doc, "\n".join(lines), True)
     return 0
 
 
