@@ -214,7 +214,7 @@ class _FailingSink(InlineFlightSink):
 
 def test_a_log_that_fails_in_flight_does_not_stop_the_flight(tmp_path):
     config = load_config("outdoor-altitude").with_duration(6.0)
-    sink = _FailingSink(FlightLog(tmp_path / "x.mcap"), after=300)
+    sink = _FailingSink(FlightLog(tmp_path / "x.mcap"), after=40)
     rec = FlightRecorder(sink)
     with SitlServer(UdpTransport(("127.0.0.1", 0)), lockstep=True, seed=3) as server:
         link = MavlinkLink(server.connection_string)

@@ -116,6 +116,10 @@ def _flight(log, path: str, inp, out) -> int:
     from gcs.log.simlog import _recv
 
     writer = FlightItemWriter(log)
+    try:
+        os.nice(10)  # a background job: the flight loop (and a SITL beside it) come first
+    except OSError:
+        pass
     error = None
     try:
         while True:
