@@ -2,7 +2,6 @@
 
 import math
 
-import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 

@@ -12,7 +12,8 @@ from gcs.control import CONTROLLERS
 from gcs.flight.clock import MonotonicClock
 from gcs.flight.embedded import EmbeddedSitl
 from gcs.errors import LogError
-from gcs.flight.fly import EXIT_CODES, Flight, FlightResult, PreflightRefused, _Interrupts
+from gcs.flight.fly import EXIT_CODES, Flight, FlightResult, PreflightRefused
+from gcs.flight.loop import Interrupts
 from gcs.flight.recorder import BYTES_PER_FLIGHT_TICK, FlightRecorder, utc_offset_ns
 from gcs.flight.output import OUTPUTS
 from gcs.link.budget import compute_budget, control_streams, format_budget, suggest_fixes
@@ -197,7 +198,7 @@ def _fly_mavlink(args, config, key, console, budget_ok, recorder, format_table) 
 def _fly(args, config, flight_class, link, child, lockstep: bool, recorder, console, format_table,
          **preflight_kwargs) -> int:
     """Preflight and fly ``flight_class`` over ``link``; the link and the child simulator (if any) end with it."""
-    interrupts = _Interrupts()
+    interrupts = Interrupts()
     clock = None if lockstep else MonotonicClock()
     if clock is not None:
         recorder.offset_ns = utc_offset_ns(clock.now_ns())

@@ -34,10 +34,6 @@ from gcs.model import Command, State
 
 __all__ = ["Flight", "FlightResult", "VehicleClock", "EXIT_CODES", "PreflightRefused"]
 
-#: Kept for callers of the earlier name.
-_Interrupts = Interrupts
-
-
 class Flight(FlightLoop):
     """One flight of ``controller`` on ``config``'s mission over a MAVLink ``link``.
 

@@ -43,7 +43,7 @@ from sitl.rig_protocol import AckResult, RigFlags, RigState
 
 __all__ = ["RigFlight", "RIG_X_STD_M"]
 
-#: Noise assumed for the rig's x reading [m] (its encoder) and its IMU angles.
+#: Noise assumed for the rig's x reading [m] (its rail encoder); also given to the locked y.
 RIG_X_STD_M = 0.005
 _US_WRAP = 1 << 32
 
@@ -288,11 +288,11 @@ class RigFlight(FlightLoop):
                 self._pump_wait(0.01)
         return predicate()
 
-    def _disarm_landed(self) -> None:
+    def _disarm_landed(self, kind: str = "landed", text: str = "landed and disarmed") -> None:
+        """DISARM (motors off) and, once acknowledged, the event ``kind``/``text``."""
         try:
-            res = self._command(rp.Disarm, "DISARM")
-            if res == AckResult.ACCEPTED:
-                self.event("landed", "landed and disarmed")
+            if self._command(rp.Disarm, "DISARM") == AckResult.ACCEPTED:
+                self.event(kind, text)
         except LinkError as exc:
             self.event("warning", f"DISARM not acknowledged: {exc}")
 
@@ -302,7 +302,7 @@ class RigFlight(FlightLoop):
         if reason == "vehicle_took_over":
             self._wait(lambda: not self.flags & RigFlags.ARMED, fc.land_timeout_s, level_thrust_n=None)
             if self.flags & RigFlags.CUTOFF:
-                self._disarm_landed_or_clear()
+                self._disarm_landed("phase", "cut-off cleared with DISARM (motors were off)")
             elif not self.flags & RigFlags.ARMED:
                 self.event("landed", "disarmed by the rig")
             return
@@ -341,13 +341,6 @@ class RigFlight(FlightLoop):
                 self.event("warning", f"not on the ground {fc.land_timeout_s:g} s after the descent began; "
                                       "DISARM anyway (motors off)")
         self._disarm_landed()
-
-    def _disarm_landed_or_clear(self) -> None:
-        try:
-            self._command(rp.Disarm, "DISARM")
-            self.event("phase", "cut-off cleared with DISARM (motors were off)")
-        except LinkError as exc:
-            self.event("warning", f"DISARM not acknowledged: {exc}")
 
     def _link_summary(self) -> dict:
         c = self.link.counters

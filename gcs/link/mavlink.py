@@ -33,6 +33,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 mavutil.set_dialect("ardupilotmega")
 
 from gcs.errors import GcsError
+from gcs.link.base import MessageWaiter
 
 __all__ = ["LinkError", "MavlinkLink", "LinkCounters", "connection_url", "COPTER_MODES"]
 
@@ -67,7 +68,7 @@ def connection_url(port: str | None, connect: str | None) -> str:
     return connect  # type: ignore[return-value]
 
 
-class MavlinkLink:
+class MavlinkLink(MessageWaiter):
     """A MAVLink connection to one vehicle.
 
     Parameters
@@ -180,25 +181,6 @@ class MavlinkLink:
                 return out
             if self._accept(msg):
                 out.append(msg)
-
-    def wait(self, predicate: Callable[[object], bool], timeout_s: float,
-             on_message: Callable[[object], None] | None = None) -> object | None:
-        """Receive until ``predicate(msg)`` holds or ``timeout_s`` of wall time passes; every message
-        received meanwhile is also passed to ``on_message``."""
-        deadline = time.monotonic() + timeout_s
-        while True:
-            batch = self.drain()
-            for i, msg in enumerate(batch):
-                if on_message is not None:
-                    on_message(msg)
-                if predicate(msg):
-                    # What came after the awaited message is not lost: the next drain returns it.
-                    self._pending = batch[i + 1:] + self._pending
-                    return msg
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                return None
-            self.conn.select(min(0.02, remaining))
 
     def wait_readable(self, timeout_s: float) -> None:
         """Block until something arrives or ``timeout_s`` passes."""

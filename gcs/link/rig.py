@@ -17,6 +17,7 @@ from typing import Callable
 
 import serial
 
+from gcs.link.base import MessageWaiter
 from gcs.link.mavlink import LinkError
 from sitl import rig_protocol as rp
 
@@ -42,7 +43,7 @@ def rig_link_budget(baud: int, control_rate_hz: float = 100.0, telemetry_rate_hz
     return {"down_b_s": down, "up_b_s": up, "capacity_b_s": cap, "down_share": down / cap, "up_share": up / cap}
 
 
-class RigLink:
+class RigLink(MessageWaiter):
     """The PC side of the rig's serial line.
 
     Parameters
@@ -119,23 +120,6 @@ class RigLink:
         """Sequence number (1..255) for ARM / DISARM."""
         self._seq8 = self._seq8 % 255 + 1
         return self._seq8
-
-    def wait(self, predicate: Callable[[rp.Message], bool], timeout_s: float,
-             on_message: Callable[[rp.Message], None] | None = None) -> rp.Message | None:
-        """Receive until ``predicate(msg)`` or ``timeout_s`` of wall time; every message also goes to ``on_message``."""
-        deadline = time.monotonic() + timeout_s
-        while True:
-            batch = self.drain()
-            for i, msg in enumerate(batch):
-                if on_message is not None:
-                    on_message(msg)
-                if predicate(msg):
-                    self._pending = batch[i + 1:] + self._pending  # the rest is not lost
-                    return msg
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                return None
-            self.wait_readable(min(0.02, remaining))
 
     def close(self) -> None:
         try:

@@ -250,9 +250,6 @@ class InlineFlightSink:
         self.writer = FlightItemWriter(log)
         self.dropped = 0
 
-    def put(self, item: tuple) -> None:
-        self.writer.apply(item)
-
     def put_many(self, items: list) -> None:
         for item in items:
             self.writer.apply(item)
@@ -335,9 +332,6 @@ class BackgroundFlightLog:
             return
         self._backlog += data
         self._pump()
-
-    def put(self, item: tuple) -> None:
-        self.put_many([item])
 
     def close(self, timeout_s: float = 30.0) -> dict:
         """Hand over what is left, wait for the writer to finish the file; ``{"messages", "bytes", "dropped"}``.

@@ -153,12 +153,11 @@ def flight_record(log: McapLog, flight: LoggedFlight, ts_s: float) -> tuple[Any,
         When the flight has fewer than two ticks.
     """
     a = flight_arrays(log, flight, estimate=False)
-    return record_from_arrays(a["state"], a["reference"], a["command"], a["steps_to_go"], bool(a["truth"]),
-                              ts_s, flight.steps, f"{log.path}: flight {flight.label}")
+    return record_from_arrays(a["state"], a["reference"], a["command"], a["steps_to_go"], ts_s, flight.steps, f"{log.path}: flight {flight.label}")
 
 
 def record_from_arrays(state: np.ndarray, ref: np.ndarray, command: np.ndarray, steps_to_go: np.ndarray,
-                       truth: bool, ts_s: float, planned_steps: int | None, what: str) -> tuple[Any, bool]:
+                       ts_s: float, planned_steps: int | None, what: str) -> tuple[Any, bool]:
     """A :class:`gcs.metrics.FlightRecord` from logged series (see :func:`flight_record`), and whether it is partial."""
     from gcs.metrics import FlightRecord
 
@@ -321,7 +320,7 @@ class _MetricsStream:
         try:
             rec = record_from_arrays(arr[T.TRUTH] if truth else arr[T.STATE], arr[T.REFERENCE],
                                      limited if limited.shape[0] else arr[T.COMMAND],
-                                     np.frombuffer(fl.steps_to_go, dtype=np.int64), truth, ts,
+                                     np.frombuffer(fl.steps_to_go, dtype=np.int64), ts,
                                      _int(info.get("steps")), label)
         except LogError as exc:
             self.closed.append((info, exc))
