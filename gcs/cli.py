@@ -148,13 +148,14 @@ def format_table(result: dict, title: str) -> str:
 
 
 def _cmd_sim(args: argparse.Namespace) -> int:
-    from gcs.sim import SimOptions, run_experiment
+    from gcs.sim import SimOptions, check_run, run_experiment
 
     config = load_config(args.config)
     if args.matrices is not None and args.matrices != config.experiment.matrices:
         config = config.with_matrices(args.matrices)
     controllers = list(CONTROLLERS) if args.controller == "all" else [args.controller]
     options = SimOptions(duration_s=args.duration, wind=args.wind, noise=not args.no_noise)
+    check_run(config, args.runs, options)  # before the log is sized: a clear refusal, exit 2
 
     def progress(name: str, i: int, n: int) -> None:
         print(f"\r  flying {name:<14} run {i + 1}/{n}", end="", file=sys.stderr, flush=True)

@@ -131,8 +131,26 @@ def _window(t: np.ndarray, lo: float, hi: float) -> np.ndarray:
     return mask
 
 
+def _window_or_last(t: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """:func:`_window`, or the last sample before ``hi`` when no sample falls inside (a window
+    shorter than the control period, in a flight of a step or two)."""
+    mask = _window(t, lo, hi)
+    if not mask.any():
+        mask[max(0, int(np.searchsorted(t, hi - 1e-9)) - 1)] = True
+    return mask
+
+
 def flight_metrics(rec: FlightRecord, config: Config, mission: Mission, cost: CostSpec | None) -> dict[str, float]:
-    """All metrics of one flight (see the module docstring)."""
+    """All metrics of one flight (see the module docstring).
+
+    A flight of one or two steps gets every metric, computed on the steps there are
+    (the steady-state error then comes from the last step before the window's end).
+
+    Raises
+    ------
+    ValueError
+        When the record holds no step.
+    """
     e = config.experiment
     mass, g = config.vehicle.mass_kg, config.vehicle.gravity_m_s2
     k = rec.command.shape[0]
@@ -157,7 +175,7 @@ def flight_metrics(rec: FlightRecord, config: Config, mission: Mission, cost: Co
     if t[-1] + rec.ts_s < hi - 1e-9:
         # The flight ended before the hold did: the steady state is the end of the flight.
         lo, hi = t[-1] + rec.ts_s - 1.0, t[-1] + rec.ts_s
-    mask = _window(t, lo, hi)
+    mask = _window_or_last(t, lo, hi)
     out["steady_state_error_m"] = float(np.mean(r[mask, 2] - s[mask, 2]))
     f_lo, f_hi = mission.flight_window()
     fmask = _window(t, f_lo, f_hi)

@@ -16,12 +16,14 @@ numbers) and a run is reproducible from ``(seed, i)``.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
 from gcs.config import Config
+from gcs.config.bounds import MAX_RUNS, WEEK_S
 from gcs.errors import GcsError
 from gcs.control import CONTROLLERS, Controller, FiniteHorizonController, make_controller, model_params
 from gcs.estimate import StateEstimator
@@ -30,9 +32,11 @@ from gcs.mission import Mission
 from gcs.model import State
 from sitl import reduced
 from sitl.sensors import Sensors
+from sitl.vehicle_params import short_repr
 from sitl.wind import Wind, WindParams
 
-__all__ = ["SimOptions", "SimRun", "SimError", "simulate", "run_experiment", "ExperimentResult"]
+__all__ = ["SimOptions", "SimRun", "SimError", "simulate", "run_experiment", "ExperimentResult", "check_run",
+           "MAX_STEPS", "MAX_RUNS"]
 
 #: Longest simulated flight in control steps (a week at 10 ms).
 MAX_STEPS = 60_480_000
@@ -74,6 +78,41 @@ class SimRun:
     metrics: dict[str, float]
 
 
+def check_run(config: Config, runs: int | None = None, options: SimOptions = SimOptions()) -> tuple[int, float]:
+    """The number of runs and the simulated duration [s] of an experiment, checked before anything flies.
+
+    Parameters
+    ----------
+    config : Config
+    runs : int or None
+        Runs per controller; None = the config's ``sim.runs``.
+    options : SimOptions
+        ``duration_s`` None = the config's ``experiment.duration_s``.
+
+    Returns
+    -------
+    (int, float)
+
+    Raises
+    ------
+    SimError
+        ``runs`` not an integer in 1..:data:`MAX_RUNS`, or a duration that is not a finite
+        number from one control step to :data:`MAX_STEPS` steps (a week at 10 ms).
+    """
+    runs = config.sim.runs if runs is None else runs
+    if isinstance(runs, bool) or not isinstance(runs, numbers.Integral) or not 1 <= runs <= MAX_RUNS:
+        raise SimError(f"--runs: must be a whole number from 1 to {MAX_RUNS}, got {short_repr(runs)}")
+    ts = config.experiment.ts_s
+    duration = config.experiment.duration_s if options.duration_s is None else options.duration_s
+    longest = min(MAX_STEPS * ts, WEEK_S)
+    if (isinstance(duration, bool) or not isinstance(duration, (int, float))
+            or not ts * (1 - 1e-9) <= duration <= longest):  # nan fails the comparison too
+        shown = f"{duration:g}" if isinstance(duration, float) else short_repr(duration)
+        raise SimError(f"--duration: must be a number of seconds from one control step ({ts:g} s) "
+                       f"to {longest:g} s, got {shown}")
+    return int(runs), float(duration)
+
+
 def simulate(config: Config, controller: str, *, run: int = 0, seed: int | None = None,
              options: SimOptions = SimOptions(), designed: Controller | None = None,
              log: Any = None) -> SimRun:
@@ -103,10 +142,8 @@ def simulate(config: Config, controller: str, *, run: int = 0, seed: int | None 
     """
     e = config.experiment
     seed = config.sim.seed if seed is None else seed
-    duration = e.duration_s if options.duration_s is None else options.duration_s
     ts = e.ts_s
-    if not (duration >= ts and math.isfinite(duration)) or duration / ts > MAX_STEPS:
-        raise SimError(f"duration must be between one step ({ts:g} s) and {MAX_STEPS * ts:g} s, got {duration!r}")
+    _, duration = check_run(config, 1, options)
     steps = int(round(duration / ts))
     if designed is None:
         ctl = make_controller(controller, config)
@@ -198,10 +235,7 @@ def run_experiment(config: Config, controllers: Sequence[str], *, runs: int | No
     for name in controllers:
         if name not in CONTROLLERS:
             raise SimError(f"unknown controller {name!r}")
-    runs = config.sim.runs if runs is None else runs
-    if runs < 1:
-        raise SimError(f"runs must be >= 1, got {runs}")
-    duration = config.experiment.duration_s if options.duration_s is None else options.duration_s
+    runs, duration = check_run(config, runs, options)
     result = ExperimentResult(config.experiment.name, runs, duration)
     for name in controllers:
         result.per_run[name] = []

@@ -11,8 +11,9 @@ Modules of the networked SITL (``sitl`` command, :class:`sitl.server.SitlServer`
 * autopilot: :mod:`sitl.ned_sensors`, :mod:`sitl.control`, :mod:`sitl.autopilot`,
   :mod:`sitl.params`, :mod:`sitl.simulation` (one tick of everything);
 * link: :mod:`sitl.telemetry`, :mod:`sitl.streams`, :mod:`sitl.dispatch`,
-  :mod:`sitl.endpoint`, :mod:`sitl.transport`, :mod:`sitl.radio`, :mod:`sitl.clock`,
-  :mod:`sitl.server`, :mod:`sitl.cli`.
+  :mod:`sitl.endpoint`, :mod:`sitl.signing`, :mod:`sitl.links` (one link per peer),
+  :mod:`sitl.transport`, :mod:`sitl.radio`, :mod:`sitl.clock`, :mod:`sitl.server`,
+  :mod:`sitl.options`, :mod:`sitl.cli`.
 """
 
 __version__ = "0.1.0"

@@ -5,36 +5,39 @@ Examples::
     sitl --udp 127.0.0.1:14550                 # GCS: udpin:127.0.0.1:14550 (like ArduPilot's --out)
     sitl --udp-listen 14560 --lockstep --seed 3 # GCS: udpout:127.0.0.1:14560, time advances per command
     sitl --tcp 5760                            # GCS: tcp:127.0.0.1:5760
+    sitl --udp 127.0.0.1:14550 --tcp 5770      # both at once: every peer of each is its own link
     sitl --pty --baud 57600 --loss 0.02 --latency 0.03   # prints /dev/pts/N: a 915 MHz radio link
     sitl --rig 4dof --lockstep --seed 1        # prints /dev/pts/N: the 4-DOF rig's XBee link (115200 baud)
 
 The first line on stdout is what the ground station passes to
-``mavutil.mavlink_connection`` (for ``--pty`` and ``--rig``: the device path).
-Ctrl-C or SIGTERM stop it cleanly (exit 0).
+``mavutil.mavlink_connection`` (for ``--pty`` and ``--rig``: the device path);
+with several endpoints, one line each, in command-line order.  Bad options
+are refused before anything starts (``sitl: error: --NAME: reason``, exit 2;
+ranges in :mod:`sitl.options`).  Ctrl-C or SIGTERM stop it cleanly (exit 0).
 """
 
 from __future__ import annotations
 
 import argparse
-import hashlib
 import logging
 import math
+import re
 import signal
 import sys
 from typing import NoReturn, Sequence
 
+from sitl import options
 from sitl.clock import MonotonicClock
 from sitl.errors import SitlError, UsageError
 from sitl.radio import RadioParams
 from sitl.rig import RIG_KINDS, RigServer
 from sitl.rig_dynamics import RigParams
-from sitl.rig_firmware import RigSafetyParams
+from sitl.rig_firmware import TICK_NS, RigSafetyParams
 from sitl.rig_sensors import RigSensorParams
 from sitl.server import SitlServer
-from sitl.simulation import InitialConditions
-from sitl.transport import PtyTransport, TcpTransport, UdpTransport, parse_host_port
+from sitl.signing import default_state_path
+from sitl.transport import PtyTransport
 from sitl.vehicle_params import MODELS, VehicleParams, bundled_vehicles, load_vehicle
-from sitl.wind import WindParams
 
 __all__ = ["main", "build_parser"]
 
@@ -55,8 +58,10 @@ conventions (ArduCopter; see sitl/autopilot.py):
                    DISARM_DELAY s landed while armed disarms
   lockstep         each SET_ATTITUDE_TARGET / SET_ACTUATOR_CONTROL_TARGET advances --period seconds,
                    then every stream message due is sent; no command, no time
-  signing          with --signing-key, unsigned or badly signed frames are rejected and counted
-                   (SYS_STATUS errors_count3); outgoing frames are signed
+  signing          with --signing-key, unsigned, badly signed and replayed frames are rejected and
+                   counted (SYS_STATUS errors_count3); outgoing frames are signed; the timestamps
+                   are kept in --signing-state, so frames captured before a restart stay refused
+  links            every UDP sender, TCP connection and the serial line has its own stream rates
 
 4-DOF rig (--rig 4dof; frames and payloads: sitl/rig_protocol.py, docs/rig-protocol.md):
   link             XBee API-mode-2 frames on a pseudo-terminal, 115200 baud unless --baud;
@@ -79,6 +84,7 @@ class _Parser(argparse.ArgumentParser):
     """ArgumentParser whose errors are one line, without the usage text."""
 
     def error(self, message: str) -> NoReturn:
+        message = re.sub(r"^argument (?:-\w/)?(--[\w-]+): ", r"\1: ", message.splitlines()[0] if message else "")
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
@@ -87,13 +93,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="sitl", description="Simulated ArduCopter quadrotor (6-DOF physics, sensors, autopilot) "
                 "behind a MAVLink endpoint.", epilog=_EPILOG.format(vehicles=", ".join(bundled_vehicles())),
                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ep = p.add_argument_group("endpoint (one; default --udp 127.0.0.1:14550)").add_mutually_exclusive_group()
-    ep.add_argument("--udp", metavar="HOST:PORT",
+    ep = p.add_argument_group("endpoints (any number, combined; default --udp 127.0.0.1:14550)")
+    ep.add_argument("--udp", metavar="HOST:PORT", dest="endpoints", action=options.EndpointAction, const="udp",
                     help="send to a ground station listening there (it uses udpin:HOST:PORT)")
-    ep.add_argument("--udp-listen", metavar="[HOST:]PORT",
+    ep.add_argument("--udp-listen", metavar="[HOST:]PORT", dest="endpoints", action=options.EndpointAction,
+                    const="udp-listen",
                     help="listen there and answer the senders (ground station: udpout:HOST:PORT; it must send first)")
-    ep.add_argument("--tcp", metavar="[HOST:]PORT", help="TCP server (ground station: tcp:HOST:PORT); HOST 127.0.0.1")
-    ep.add_argument("--pty", action="store_true",
+    ep.add_argument("--tcp", metavar="[HOST:]PORT", dest="endpoints", action=options.EndpointAction, const="tcp",
+                    help="TCP server (ground station: tcp:HOST:PORT); HOST 127.0.0.1")
+    ep.add_argument("--pty", dest="endpoints", action=options.EndpointAction, const="pty", nargs=0,
                     help="serial port on a pseudo-terminal; prints its path (open it like /dev/ttyUSB0)")
     sim = p.add_argument_group("simulation")
     sim.add_argument("--vehicle", metavar="NAME|FILE", default=None,
@@ -126,6 +134,9 @@ def build_parser() -> argparse.ArgumentParser:
     link.add_argument("--latency", metavar="S", type=float, default=0.0, help="one-way latency [s]")
     link.add_argument("--signing-key", metavar="KEY", default=None,
                       help="MAVLink 2 signing: 64 hex digits, or a passphrase (key = SHA-256 of it, as MAVProxy)")
+    link.add_argument("--signing-state", metavar="PATH", default=None,
+                      help="with --signing-key: file keeping the signing timestamps across restarts (default: "
+                           "${XDG_CACHE_HOME:-~/.cache}/quadrotor-sitl/signing-<hash of key and sysid>.json)")
     rig = p.add_argument_group("4-DOF rig")
     rig.add_argument("--rig", choices=RIG_KINDS, default=None,
                      help="emulate the paper's indoor 4-DOF rig and its XBee serial protocol instead of "
@@ -140,56 +151,6 @@ def build_parser() -> argparse.ArgumentParser:
                        help="stop when process PID (the ground station that started this SITL) is gone, "
                             "even if it was killed without a word")
     return p
-
-
-def _floats(text: str, option: str, count: tuple[int, int]) -> list[float]:
-    try:
-        vals = [float(v) for v in text.split(",")]
-    except ValueError:
-        raise UsageError(f"{option}: expected comma-separated numbers, got {text!r}") from None
-    if not count[0] <= len(vals) <= count[1]:
-        raise UsageError(f"{option}: expected {count[0]} to {count[1]} numbers, got {text!r}")
-    return vals
-
-
-def _wind(text: str | None) -> WindParams | None:
-    if text is None:
-        return None
-    v = _floats(text, "--wind", (1, 4))
-    try:
-        return WindParams(mean_speed_m_s=v[0], direction_deg=v[1] if len(v) > 1 else None,
-                          gust_std_m_s=v[2] if len(v) > 2 else 0.0, gust_tau_s=v[3] if len(v) > 3 else 2.0)
-    except ValueError as exc:
-        raise UsageError(f"--wind: {exc}") from None
-
-
-def _params(items: Sequence[str], sysid: int | None) -> dict[str, float]:
-    out: dict[str, float] = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        if not sep or not name:
-            raise UsageError(f"--param: expected NAME=VALUE, got {item!r}")
-        try:
-            out[name.strip().upper()] = float(value)
-        except ValueError:
-            raise UsageError(f"--param {name}: not a number: {value!r}") from None
-    if sysid is not None:
-        out["SYSID_THISMAV"] = float(sysid)
-    return out
-
-
-def _signing_key(text: str | None) -> bytes | None:
-    if text is None:
-        return None
-    t = text.strip()
-    if len(t) == 64:
-        try:
-            return bytes.fromhex(t)
-        except ValueError:
-            pass
-    if not t:
-        raise UsageError("--signing-key: empty")
-    return hashlib.sha256(t.encode("utf-8")).digest()
 
 
 def _describe(v: VehicleParams) -> str:
@@ -224,28 +185,23 @@ def _describe_rig() -> str:
 
 _MAVLINK_ONLY = (("vehicle", None, "--vehicle"), ("model", None, "--model"), ("wind", None, "--wind"),
                  ("param", [], "--param"), ("sysid", None, "--sysid"), ("prearm_delay", 0.0, "--prearm-delay"),
-                 ("signing_key", None, "--signing-key"), ("start_attitude", None, "--start-attitude"),
-                 ("start_altitude", 0.0, "--start-altitude"), ("udp", None, "--udp"),
-                 ("udp_listen", None, "--udp-listen"), ("tcp", None, "--tcp"))
+                 ("signing_key", None, "--signing-key"), ("signing_state", None, "--signing-state"),
+                 ("start_attitude", None, "--start-attitude"), ("start_altitude", 0.0, "--start-altitude"))
 
 
 def _run_rig(args: argparse.Namespace) -> int:
     for attr, default, option in _MAVLINK_ONLY:
         if getattr(args, attr) != default:
             raise UsageError(f"{option}: not available with --rig (the rig is served on a pseudo-terminal)")
+    for kind, _, option in args.endpoints or []:
+        if kind != "pty":
+            raise UsageError(f"{option}: not available with --rig (the rig is served on a pseudo-terminal)")
+    options.check_common(args, TICK_NS * 1e-9)
     if args.describe:
         print(_describe_rig(), flush=True)
         return 0
-    if not 0.0 <= args.loss <= 1.0:
-        raise UsageError(f"--loss: must be in [0, 1], got {args.loss}")
-    if not args.latency >= 0.0:
-        raise UsageError(f"--latency: must be >= 0, got {args.latency}")
     ber = 0.0 if args.bit_error_rate is None else args.bit_error_rate
-    if not 0.0 <= ber < 1.0:
-        raise UsageError(f"--bit-error-rate: must be in [0, 1), got {ber}")
     baud = args.baud if args.baud is not None else 115200
-    if baud < 0:
-        raise UsageError(f"--baud: must be >= 0, got {baud}")
     clock = MonotonicClock()
     server = RigServer(PtyTransport(clock.monotonic_ns), lockstep=args.lockstep, control_period_s=args.period,
                        seed=args.seed, radio=RadioParams(baud=baud, loss=args.loss, latency_s=args.latency),
@@ -275,10 +231,11 @@ def _serve(server: SitlServer | RigServer, what: str, args: argparse.Namespace) 
     if getattr(args, "parent_pid", None) is not None:
         _watch_parent(args.parent_pid, server.request_stop)
     try:
-        print(server.connection_string, flush=True)
+        strings = getattr(server, "connection_strings", None) or [server.connection_string]
+        print("\n".join(strings), flush=True)
         timing = f"lockstep {args.period:g} s" if args.lockstep else "real time"
         print(f"sitl: {what}, {timing}, seed {args.seed}; "
-              f"ground station: {server.connection_string}", file=sys.stderr, flush=True)
+              f"ground station: {', '.join(strings)}", file=sys.stderr, flush=True)
         server.run()
     finally:
         for s, h in old.items():
@@ -292,46 +249,30 @@ def _run(args: argparse.Namespace) -> int:
         return _run_rig(args)
     if args.bit_error_rate is not None:
         raise UsageError("--bit-error-rate: only with --rig")
+    options.check_common(args, 0.0025)
+    options.check_mavlink(args)
     vehicle = load_vehicle(args.vehicle)
     if args.model is not None:
         vehicle = vehicle.with_model(args.model)
     if args.describe:
         print(_describe(vehicle), flush=True)
         return 0
-    if not 0.0 <= args.loss <= 1.0:
-        raise UsageError(f"--loss: must be in [0, 1], got {args.loss}")
-    if not args.prearm_delay >= 0.0:
-        raise UsageError(f"--prearm-delay: must be >= 0, got {args.prearm_delay}")
-    if not args.latency >= 0.0:
-        raise UsageError(f"--latency: must be >= 0, got {args.latency}")
-    baud = args.baud if args.baud is not None else (57600 if args.pty else 0)
-    if baud < 0:
-        raise UsageError(f"--baud: must be >= 0, got {baud}")
-    initial = InitialConditions(args.start_altitude)
-    if args.start_attitude is not None:
-        r, pch, y = _floats(args.start_attitude, "--start-attitude", (3, 3))
-        initial = InitialConditions(args.start_altitude, r, pch, y)
-    wind = _wind(args.wind)
-    params = _params(args.param, args.sysid)
-    key = _signing_key(args.signing_key)
+    pty = any(kind == "pty" for kind, _, _ in args.endpoints or [])
+    baud = args.baud if args.baud is not None else (57600 if pty else 0)
+    initial = options.initial(args.start_altitude, args.start_attitude)
+    wind = options.wind(args.wind)
+    params = options.params(args.param, args.sysid, vehicle)
+    key = options.signing_key(args.signing_key)
+    state = None
+    if key is not None:
+        sysid = int(params.get("SYSID_THISMAV", 1))
+        state = args.signing_state if args.signing_state is not None else default_state_path(key, sysid)
     radio = RadioParams(baud=baud, loss=args.loss, latency_s=args.latency)
     clock = MonotonicClock()
-    try:
-        if args.pty:
-            transport = PtyTransport(clock.monotonic_ns)
-        elif args.tcp is not None:
-            transport = TcpTransport(parse_host_port(args.tcp))
-        elif args.udp_listen is not None:
-            transport = UdpTransport(parse_host_port(args.udp_listen))
-        else:
-            remote = parse_host_port(args.udp or "127.0.0.1:14550")
-            local = "127.0.0.1" if remote[0].startswith("127.") or remote[0] == "localhost" else "0.0.0.0"
-            transport = UdpTransport((local, 0), remote)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
-    server = SitlServer(transport, vehicle=vehicle, lockstep=args.lockstep, control_period_s=args.period,
-                        seed=args.seed, wind=wind, initial=initial, params=params, signing_key=key, radio=radio,
-                        clock=clock, prearm_delay_s=args.prearm_delay)
+    transports = options.open_endpoints(args.endpoints, clock.monotonic_ns)
+    server = SitlServer(transports, vehicle=vehicle, lockstep=args.lockstep, control_period_s=args.period,
+                        seed=args.seed, wind=wind, initial=initial, params=params, signing_key=key,
+                        signing_state=state, radio=radio, clock=clock, prearm_delay_s=args.prearm_delay)
     return _serve(server, f"{vehicle.name} ({vehicle.model})", args)
 
 

@@ -20,6 +20,18 @@ TIMESYNC                       request (tc1 = 0) answered with tc1 = simulated t
 Messages whose ``target_system`` is neither 0 nor ours (or whose
 ``target_component`` is neither 0 nor ours) are ignored and counted;
 anything else is ignored (counted as unhandled, except HEARTBEAT).
+
+Stream rates are per link: :meth:`Dispatcher.handle` takes the requesting
+link's :class:`~sitl.streams.StreamScheduler`, and SET_MESSAGE_INTERVAL,
+GET_MESSAGE_INTERVAL, REQUEST_DATA_STREAM and a PARAM_SET of an ``SR0_*``
+rate act on that one only (the ``SR0_*`` values show the last request of any
+link).
+
+Non-finite values (NaN, inf) where a number is used -- a SET_ATTITUDE_TARGET
+quaternion, rate or thrust that is not ignored by ``type_mask``, actuator
+controls, the parameters of the commands above, a PARAM_SET value -- refuse
+the message (targets: not applied; commands: MAV_RESULT_DENIED; parameters:
+unchanged, "Param write denied") and count it in ``LinkCounters.non_finite``.
 """
 
 from __future__ import annotations
@@ -39,6 +51,12 @@ __all__ = ["Dispatcher", "STEPPING_MESSAGES"]
 
 M = mavlink
 STEPPING_MESSAGES = frozenset({"SET_ATTITUDE_TARGET", "SET_ACTUATOR_CONTROL_TARGET"})
+# ATTITUDE_TARGET_TYPEMASK bits: body roll/pitch/yaw rate ignore 1/2/4, throttle 64, attitude 128
+_THROTTLE_IGNORE = 64
+_ATTITUDE_IGNORE = 128
+# How many leading parameters each handled command uses (all must be finite).
+_COMMAND_PARAMS = {M.MAV_CMD_DO_SET_MODE: 2, M.MAV_CMD_COMPONENT_ARM_DISARM: 2, M.MAV_CMD_SET_MESSAGE_INTERVAL: 2,
+                   M.MAV_CMD_GET_MESSAGE_INTERVAL: 1, M.MAV_CMD_REQUEST_MESSAGE: 1}
 _ACCEPTED, _DENIED, _FAILED, _UNSUPPORTED = (M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_DENIED, M.MAV_RESULT_FAILED,
                                             M.MAV_RESULT_UNSUPPORTED)
 
@@ -56,6 +74,7 @@ class Dispatcher:
     ----------
     sim : Simulation
     streams : StreamScheduler
+        Rates acted on when :meth:`handle` is given none (the server gives each message its link's).
     endpoint : MavlinkEndpoint
     telemetry_counters : TelemetryCounters
         Updated from the link counters for SYS_STATUS.
@@ -68,6 +87,7 @@ class Dispatcher:
         self.endpoint = endpoint
         self.tcounters = telemetry_counters
         self.counters: LinkCounters = endpoint.counters
+        self._link: StreamScheduler | None = None
         self._handlers = {
             "SET_ATTITUDE_TARGET": self._set_attitude_target,
             "SET_ACTUATOR_CONTROL_TARGET": self._set_actuator_control_target,
@@ -83,8 +103,9 @@ class Dispatcher:
         sim.params.add_listener(self._param_changed)
 
     # ------------------------------------------------------------------ entry
-    def handle(self, msg: mavlink.MAVLink_message) -> tuple[list[mavlink.MAVLink_message], bool]:
-        """Act on ``msg``.
+    def handle(self, msg: mavlink.MAVLink_message,
+               streams: StreamScheduler | None = None) -> tuple[list[mavlink.MAVLink_message], bool]:
+        """Act on ``msg`` received on the link whose stream rates are ``streams`` (default: the constructor's).
 
         Returns
         -------
@@ -100,21 +121,30 @@ class Dispatcher:
         if not self._for_us(msg):
             return [], False
         replies: list[mavlink.MAVLink_message] = []
+        self._link = streams if streams is not None else self.streams
         try:
             handler(msg, replies)
         except Exception:  # noqa: BLE001 - a hostile field value must never stop the vehicle
             self.counters.handler_errors += 1
-            return replies, kind in STEPPING_MESSAGES
+        finally:
+            self._link = None
         return replies, kind in STEPPING_MESSAGES
 
     def sync_counters(self) -> None:
         """Copy link counters into the SYS_STATUS counters."""
         c, t = self.counters, self.tcounters
         t.frames_in = c.frames_in
-        t.errors = c.bad_prefix + c.bad_crc + c.malformed + c.bad_signature + c.unsigned
+        t.errors = c.bad_prefix + c.bad_crc + c.malformed + c.signature_rejected
         t.unknown = c.unknown
-        t.bad_signature = c.bad_signature + c.unsigned
+        t.bad_signature = c.signature_rejected
         t.wrong_target = c.wrong_target
+
+    def _non_finite(self, *values: float) -> bool:
+        """True (and counted) if any of ``values`` is NaN or infinite."""
+        if all(math.isfinite(v) for v in values):
+            return False
+        self.counters.non_finite += 1
+        return True
 
     def _for_us(self, msg) -> bool:
         ts = getattr(msg, "target_system", None)
@@ -133,12 +163,19 @@ class Dispatcher:
 
     # ------------------------------------------------------------------ targets
     def _set_attitude_target(self, msg, replies) -> None:
-        self.sim.autopilot.set_attitude_target(
-            int(msg.type_mask), list(msg.q), (msg.body_roll_rate, msg.body_pitch_rate, msg.body_yaw_rate),
-            float(msg.thrust), self._now)
+        mask = int(msg.type_mask)
+        rates = (float(msg.body_roll_rate), float(msg.body_pitch_rate), float(msg.body_yaw_rate))
+        used = [float(msg.thrust)] if not mask & _THROTTLE_IGNORE else []
+        if not mask & _ATTITUDE_IGNORE:
+            used += [float(v) for v in msg.q]
+        used += [r for bit, r in zip((1, 2, 4), rates) if not mask & bit]
+        if self._non_finite(*used):
+            self.sim.autopilot.targets_rejected += 1
+            return
+        self.sim.autopilot.set_attitude_target(mask, list(msg.q), rates, float(msg.thrust), self._now)
 
     def _set_actuator_control_target(self, msg, replies) -> None:
-        if int(msg.group_mlx) != 0:
+        if int(msg.group_mlx) != 0 or self._non_finite(*(float(v) for v in msg.controls[:4])):
             self.sim.autopilot.targets_rejected += 1
             return
         self.sim.autopilot.set_actuator_controls(list(msg.controls), self._now)
@@ -159,15 +196,20 @@ class Dispatcher:
     def _command(self, msg, cmd: int, p, replies) -> None:
         ap = self.sim.autopilot
         now = self._now
+        streams = self._link if self._link is not None else self.streams
+        needed = _COMMAND_PARAMS.get(cmd, 0)
+        if needed and self._non_finite(*p[:needed]):
+            self._ack(msg, cmd, _DENIED, replies)
+            return
         if cmd == M.MAV_CMD_DO_SET_MODE:
-            if not (math.isfinite(p[0]) and math.isfinite(p[1])) or not int(p[0]) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            if not int(p[0]) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
                 result = _FAILED
             else:
                 result = _ACCEPTED if ap.set_mode(int(p[1]), now)[0] else _FAILED
         elif cmd == M.MAV_CMD_NAV_LAND:
             result = _ACCEPTED if ap.set_mode(9, now)[0] else _FAILED
         elif cmd == M.MAV_CMD_COMPONENT_ARM_DISARM:
-            force = math.isfinite(p[1]) and int(p[1]) == FORCE_MAGIC
+            force = int(p[1]) == FORCE_MAGIC
             if p[0] == 1.0:
                 ok = ap.arm(now, force)[0]
             elif p[0] == 0.0:
@@ -176,28 +218,23 @@ class Dispatcher:
                 ok = False
             result = _ACCEPTED if ok else _FAILED
         elif cmd == M.MAV_CMD_SET_MESSAGE_INTERVAL:
-            if not (math.isfinite(p[0]) and math.isfinite(p[1])):
-                result = _DENIED
-            else:
-                result = _ACCEPTED if self.streams.set_interval_us(int(p[0]), p[1], now) else _FAILED
+            result = _ACCEPTED if streams.set_interval_us(int(p[0]), p[1], now) else _FAILED
         elif cmd == M.MAV_CMD_GET_MESSAGE_INTERVAL:
-            if not math.isfinite(p[0]):
-                result = _DENIED
-            else:
-                # The field is int32: an interval set beyond it (a hostile request) reads back clamped.
-                interval = max(-1, min(int(self.streams.interval_us(int(p[0]))), 2**31 - 1))
-                replies.append(M.MAVLink_message_interval_message(int(p[0]) & 0xFFFF, interval))
-                result = _ACCEPTED
+            # The field is int32: an interval set beyond it (a hostile request) reads back clamped.
+            interval = max(-1, min(int(streams.interval_us(int(p[0]))), 2**31 - 1))
+            replies.append(M.MAVLink_message_interval_message(int(p[0]) & 0xFFFF, interval))
+            result = _ACCEPTED
         elif cmd == M.MAV_CMD_REQUEST_MESSAGE:
             result = _FAILED
-            if math.isfinite(p[0]):
-                mid = int(p[0])
-                m = autopilot_version(self.sim) if mid == M.MAVLINK_MSG_ID_AUTOPILOT_VERSION else build(
-                    mid, self.sim, self.tcounters)
-                if m is not None:
-                    self._ack(msg, cmd, _ACCEPTED, replies)
-                    replies.append(m)
-                    return
+            mid = int(p[0])
+            if mid == M.MAVLINK_MSG_ID_SYS_STATUS:
+                self.sync_counters()  # as the streamed one: the link counters of now
+            m = autopilot_version(self.sim) if mid == M.MAVLINK_MSG_ID_AUTOPILOT_VERSION else build(
+                mid, self.sim, self.tcounters)
+            if m is not None:
+                self._ack(msg, cmd, _ACCEPTED, replies)
+                replies.append(m)
+                return
         elif cmd == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             self._ack(msg, cmd, _ACCEPTED, replies)
             replies.append(autopilot_version(self.sim))
@@ -225,9 +262,11 @@ class Dispatcher:
     def _param_changed(self, name: str, value: float) -> None:
         if name == "SYSID_THISMAV":
             self.endpoint.system_id = int(value)
+        if self._link is None:  # not changed by a link (start-up overrides): no link's rates change
+            return
         for sid, pname in STREAM_PARAMS.items():
             if pname == name:
-                self.streams.set_group_rate(sid, value, self._now)
+                self._link.set_group_rate(sid, value, self._now)
 
     def _param_value(self, name: str) -> mavlink.MAVLink_message:
         ps = self.sim.params
@@ -253,7 +292,10 @@ class Dispatcher:
             self.counters.unhandled += 1
             self.sim.autopilot.events.append((SEVERITY_WARNING, f"Param write denied ({name[:16]}): unknown"))
             return
-        ok, reason = ps.set(name, msg.param_value)
+        if self._non_finite(float(msg.param_value)):
+            ok, reason = False, f"not finite: {float(msg.param_value)!r}"
+        else:
+            ok, reason = ps.set(name, msg.param_value)
         if not ok:
             self.sim.autopilot.events.append((SEVERITY_WARNING, f"Param write denied ({name}): {reason}"[:50]))
         replies.append(self._param_value(name))

@@ -2,7 +2,9 @@
 
 Decoding uses pymavlink's generated ``ardupilotmega`` dialect with robust
 parsing, one parser per peer (a TCP connection, a UDP sender, the serial
-line).  Bytes that are not a valid frame for us never raise; they are
+line); encoding keeps one sequence number per peer (as ArduPilot per
+channel), so a ground station that sees only its own link's frames sees no
+gaps.  Bytes that are not a valid frame for us never raise; they are
 counted in :class:`LinkCounters`:
 
 * ``garbage_bytes`` / ``bad_prefix``: bytes skipped while looking for a frame start;
@@ -10,23 +12,34 @@ counted in :class:`LinkCounters`:
 * ``malformed``: bad length, bad flags, unpack failures, a frame cut at the
   end of a UDP datagram (``truncated``), parser failures;
 * ``unknown``: valid frames of message ids the dialect does not know;
-* ``bad_signature`` / ``unsigned``: with a signing key, frames with a wrong
-  signature (or stale timestamp) and unsigned frames (RADIO_STATUS excepted,
-  as ArduPilot does for SiK radios).
+* ``non_finite`` (counted by :mod:`sitl.dispatch`): valid frames refused for a
+  NaN or infinite value where a number is used;
+* ``bad_signature`` / ``replayed`` / ``stale_timestamp`` / ``unsigned``: with a
+  signing key, signed frames with a wrong signature, signed frames whose
+  timestamp is not after their stream's last one, first frames of a new
+  stream more than a minute behind our timestamp, and unsigned frames
+  (RADIO_STATUS excepted, as ArduPilot does for SiK radios).
 
-Signing (MAVLink 2): with ``signing_key`` set, outgoing frames are signed
-and every parser shares one :class:`MAVLinkSigning` state, so the outgoing
-timestamp follows the newest valid incoming one (the ground station's clock;
-there is no wall clock here), as ArduPilot does without GPS time.
+Signing (MAVLink 2, :mod:`sitl.signing`): with ``signing_key`` set, outgoing
+frames are signed and every parser shares one signing state and one
+:class:`~sitl.signing.SignatureCheck` (signature first, then the timestamp
+rules).  The local timestamp starts at the wall clock and follows the newest
+valid incoming one.  With ``signing_state`` the timestamps are kept in a file
+(:class:`~sitl.signing.SigningStateFile`): loaded here, saved by
+:meth:`MavlinkEndpoint.persist_signing`.
 """
 
 from __future__ import annotations
 
 import logging
+import os
 from dataclasses import asdict, dataclass
 from typing import Hashable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from sitl.signing import (REJECT_REPLAYED, REJECT_STALE, SignatureCheck, SigningStateFile,
+                          install_signature_check, setup_signing)
 
 __all__ = ["LinkCounters", "MavlinkEndpoint"]
 
@@ -49,8 +62,11 @@ class LinkCounters:
     truncated: int = 0
     unknown: int = 0
     bad_signature: int = 0
+    replayed: int = 0
+    stale_timestamp: int = 0
     unsigned: int = 0
     wrong_target: int = 0
+    non_finite: int = 0
     unhandled: int = 0
     handler_errors: int = 0
     frames_out: int = 0
@@ -62,8 +78,13 @@ class LinkCounters:
     @property
     def rejected(self) -> int:
         """Everything that was not a valid frame for us."""
-        return (self.bad_prefix + self.bad_crc + self.malformed + self.unknown + self.bad_signature
-                + self.unsigned + self.wrong_target)
+        return (self.bad_prefix + self.bad_crc + self.malformed + self.unknown + self.signature_rejected
+                + self.wrong_target)
+
+    @property
+    def signature_rejected(self) -> int:
+        """Frames refused by signing: wrong signature, replayed, stale or unsigned."""
+        return self.bad_signature + self.replayed + self.stale_timestamp + self.unsigned
 
     def as_dict(self) -> dict[str, int]:
         """Plain dictionary (a snapshot)."""
@@ -87,21 +108,28 @@ class MavlinkEndpoint:
     signing_key : bytes or None
         32-byte MAVLink 2 secret key; None = no signing.
     counters : LinkCounters or None
+    signing_state : str, PathLike or None
+        With a key: the file that keeps the signing timestamps across restarts
+        (loaded now); None = in memory only.
     """
 
     def __init__(self, system_id: int = 1, component_id: int = 1, signing_key: bytes | None = None,
-                 counters: LinkCounters | None = None) -> None:
+                 counters: LinkCounters | None = None, signing_state: str | os.PathLike | None = None) -> None:
         self.counters = counters or LinkCounters()
         self.mav = mavlink.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         self._signing = self.mav.signing
+        self._check: SignatureCheck | None = None
+        self._state: SigningStateFile | None = None
         if signing_key is not None:
             if len(signing_key) != 32:
                 raise ValueError("signing key must be 32 bytes")
-            self._signing.secret_key = bytes(signing_key)
-            self._signing.sign_outgoing = True
-            self._signing.link_id = 0
-            self._signing.allow_unsigned_callback = lambda mav, msg_id: msg_id == _RADIO_STATUS
+            self._check = setup_signing(self.mav, bytes(signing_key), link_id=0,
+                                        allow_unsigned_callback=lambda mav, msg_id: msg_id == _RADIO_STATUS)
+            if signing_state is not None:
+                self._state = SigningStateFile(signing_state)
+                self._state.load(self._signing)
         self._parsers: dict[Hashable, mavlink.MAVLink] = {}
+        self._encoders: dict[Hashable, mavlink.MAVLink] = {}
 
     @property
     def system_id(self) -> int:
@@ -110,11 +138,29 @@ class MavlinkEndpoint:
     @system_id.setter
     def system_id(self, value: int) -> None:
         self.mav.srcSystem = int(value)
+        for enc in self._encoders.values():
+            enc.srcSystem = int(value)
 
     @property
     def signing(self) -> bool:
         """True when a signing key is configured."""
         return self._signing.secret_key is not None
+
+    @property
+    def signature_check(self) -> SignatureCheck | None:
+        """The shared signature check (None without a key)."""
+        return self._check
+
+    @property
+    def signing_timestamp(self) -> int:
+        """The local signing timestamp (what the next signed frame carries) [10 us since 2015]."""
+        return int(self._signing.timestamp)
+
+    def persist_signing(self, force: bool = False) -> bool:
+        """Save the signing state file if due (at most once a second) or ``force``; True if written."""
+        if self._state is None:
+            return False
+        return self._state.maybe_save(self._signing, force=force)
 
     def _parser(self, peer: Hashable) -> mavlink.MAVLink:
         p = self._parsers.get(peer)
@@ -124,12 +170,15 @@ class MavlinkEndpoint:
             p = mavlink.MAVLink(None, srcSystem=self.mav.srcSystem, srcComponent=self.mav.srcComponent)
             p.robust_parsing = True
             p.signing = self._signing
+            if self._check is not None:
+                install_signature_check(p, self._check)
             self._parsers[peer] = p
         return p
 
     def forget(self, peer: Hashable) -> None:
-        """Drop the parser of a peer that went away."""
+        """Drop the parser and the sequence number of a peer that went away."""
         self._parsers.pop(peer, None)
+        self._encoders.pop(peer, None)
 
     def decode(self, peer: Hashable, data: bytes, datagram: bool = False) -> list[mavlink.MAVLink_message]:
         """Valid messages in ``data`` received from ``peer``.
@@ -181,7 +230,13 @@ class MavlinkEndpoint:
                 c.bad_crc += 1
             elif reason == "Invalid signature":
                 if len(data) > 2 and data[0] == mavlink.PROTOCOL_MARKER_V2 and data[2] & mavlink.MAVLINK_IFLAG_SIGNED:
-                    c.bad_signature += 1
+                    why = self._check.last_rejection if self._check is not None else ""
+                    if why == REJECT_REPLAYED:
+                        c.replayed += 1
+                    elif why == REJECT_STALE:
+                        c.stale_timestamp += 1
+                    else:
+                        c.bad_signature += 1
                 else:
                     c.unsigned += 1
             else:
@@ -193,10 +248,26 @@ class MavlinkEndpoint:
         c.frames_in += 1
         out.append(m)
 
-    def encode(self, msg: mavlink.MAVLink_message) -> bytes:
-        """Frame ``msg`` (MAVLink 2, signed if configured) and advance the sequence number."""
-        buf = msg.pack(self.mav)
-        self.mav.seq = (self.mav.seq + 1) & 0xFF
+    def _encoder(self, peer: Hashable | None) -> mavlink.MAVLink:
+        if peer is None:
+            return self.mav
+        e = self._encoders.get(peer)
+        if e is None:
+            if len(self._encoders) >= _MAX_PARSERS:
+                self._encoders.pop(next(iter(self._encoders)))
+            e = mavlink.MAVLink(None, srcSystem=self.mav.srcSystem, srcComponent=self.mav.srcComponent)
+            e.signing = self._signing
+            self._encoders[peer] = e
+        return e
+
+    def encode(self, msg: mavlink.MAVLink_message, peer: Hashable | None = None) -> bytes:
+        """Frame ``msg`` for ``peer`` (MAVLink 2, signed if configured) and advance that peer's sequence number.
+
+        ``peer`` None uses a sequence shared by no peer (tools and tests).
+        """
+        enc = self._encoder(peer)
+        buf = msg.pack(enc)
+        enc.seq = (enc.seq + 1) & 0xFF
         self.counters.frames_out += 1
         self.counters.bytes_out += len(buf)
         return buf

@@ -11,6 +11,7 @@ seed and traffic.  Times are integer nanoseconds from the injected clock.
 
 from __future__ import annotations
 
+import math
 import random
 from collections import deque
 from dataclasses import dataclass
@@ -45,8 +46,8 @@ class RadioParams:
             raise ValueError(f"baud must be >= 0, got {self.baud!r}")
         if not 0.0 <= self.loss <= 1.0:
             raise ValueError(f"loss must be in [0, 1], got {self.loss!r}")
-        if not self.latency_s >= 0.0:
-            raise ValueError(f"latency must be >= 0, got {self.latency_s!r}")
+        if not 0.0 <= self.latency_s < math.inf:
+            raise ValueError(f"latency must be finite and >= 0, got {self.latency_s!r}")
         if self.queue_bytes < 280:
             raise ValueError(f"queue_bytes must hold a MAVLink frame (>= 280), got {self.queue_bytes!r}")
 
@@ -123,11 +124,11 @@ class RadioLink:
     Parameters
     ----------
     params : RadioParams
-    seed : int
+    seed : int or str
         Seeds the loss decisions (``up`` and ``down`` have their own streams).
     """
 
-    def __init__(self, params: RadioParams, seed: int = 0) -> None:
+    def __init__(self, params: RadioParams, seed: int | str = 0) -> None:
         self.params = params
         self.up = RadioPipe(params, random.Random(f"{seed}/radio/up"))
         self.down = RadioPipe(params, random.Random(f"{seed}/radio/down"))

@@ -48,6 +48,7 @@ then the serial port discards its unread output (see
 from __future__ import annotations
 
 import logging
+import math
 import random
 import select
 import socket
@@ -111,7 +112,7 @@ class RigServer:
                  initial: PlantState | None = None) -> None:
         try:
             ticks = control_period_s * 1e9 / TICK_NS
-            if not control_period_s > 0 or abs(ticks - round(ticks)) > 1e-6 or round(ticks) < 1:
+            if not 0 < control_period_s < math.inf or abs(ticks - round(ticks)) > 1e-6 or round(ticks) < 1:
                 raise UsageError(f"control period {control_period_s!r} s is not a multiple of the "
                                  f"{TICK_NS / 1e6:g} ms onboard period")
             if not 0.0 <= bit_error_rate < 1.0:

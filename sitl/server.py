@@ -29,17 +29,35 @@ Time
   wall-clock second so ``wait_heartbeat`` works.  Same seed + same commands
   = same trajectory, however fast the client runs.
 
-Every new peer (UDP sender, TCP client, first bytes on the serial line) gets
-a HEARTBEAT at once.
+Links
+-----
+The server may serve several endpoints at once (e.g. UDP and TCP); every
+peer of every endpoint -- a UDP sender address (or the fixed ``udpin:``
+destination), a TCP connection, the serial line -- is its own link
+(:mod:`sitl.links`) with its own stream rates, as ArduPilot keeps them per
+channel.  A stream message goes to the links whose schedule made it due;
+replies go to the link that asked; HEARTBEAT (each link's 1 Hz, and the
+lockstep wall-clock one) and STATUSTEXT go to every link.  Every new peer
+(UDP sender, TCP client, first bytes on the serial line) gets a HEARTBEAT at
+once.
+
+Signing
+-------
+With ``signing_key``, frames are verified by :mod:`sitl.signing` (signature
+first, then timestamps); with ``signing_state`` the timestamps survive a
+restart (file written at most once a second and when the server closes), so a
+frame captured before the restart is refused.
 """
 
 from __future__ import annotations
 
 import logging
+import math
+import os
 import select
 import socket
 import threading
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -47,7 +65,8 @@ from sitl.clock import Clock, MonotonicClock
 from sitl.dispatch import Dispatcher
 from sitl.endpoint import LinkCounters, MavlinkEndpoint
 from sitl.errors import SitlError, UsageError
-from sitl.radio import RadioLink, RadioParams
+from sitl.links import LinkKey, Links
+from sitl.radio import RadioParams
 from sitl.simulation import InitialConditions, Simulation
 from sitl.streams import StreamScheduler
 from sitl.telemetry import TelemetryCounters, build, heartbeat
@@ -67,9 +86,10 @@ class SitlServer:
 
     Parameters
     ----------
-    transport : Transport
+    transport : Transport or sequence of Transport
         :class:`~sitl.transport.UdpTransport`, :class:`~sitl.transport.TcpTransport`
-        or :class:`~sitl.transport.PtyTransport`.  The server closes it.
+        or :class:`~sitl.transport.PtyTransport`, or several of them (each peer of
+        each is a link).  The server closes them.
     vehicle : VehicleParams, str or None
         Parameters, a bundled vehicle name or a TOML path (default ``quad-1kg``).
     model : {"rigid_body", "reduced"} or None
@@ -85,8 +105,11 @@ class SitlServer:
         ArduPilot parameter overrides, e.g. ``{"GUID_OPTIONS": 8}``.
     signing_key : bytes or None
         32-byte MAVLink 2 signing key.
+    signing_state : str, PathLike or None
+        With a key: the file keeping the signing timestamps across restarts
+        (:class:`~sitl.signing.SigningStateFile`); None = in memory only.
     radio : RadioParams or None
-        Baud limit / loss / latency applied to both directions.
+        Baud limit / loss / latency applied to both directions of every link.
     clock : Clock or None
         Monotonic clock (default: :class:`~sitl.clock.MonotonicClock`).
     loop_rate_hz : int
@@ -96,18 +119,21 @@ class SitlServer:
         autopilot whose estimator is settling.
     """
 
-    def __init__(self, transport: Transport, *, vehicle: VehicleParams | str | None = None, model: str | None = None,
-                 lockstep: bool = False, control_period_s: float = 0.01, seed: int = 0,
+    def __init__(self, transport: Transport | Sequence[Transport], *, vehicle: VehicleParams | str | None = None,
+                 model: str | None = None, lockstep: bool = False, control_period_s: float = 0.01, seed: int = 0,
                  wind: WindParams | None = None, initial: InitialConditions | None = None,
                  params: Mapping[str, float] | None = None, signing_key: bytes | None = None,
-                 radio: RadioParams | None = None, clock: Clock | None = None, loop_rate_hz: int = 400,
-                 prearm_delay_s: float = 0.0) -> None:
+                 signing_state: str | os.PathLike | None = None, radio: RadioParams | None = None,
+                 clock: Clock | None = None, loop_rate_hz: int = 400, prearm_delay_s: float = 0.0) -> None:
+        transports = [transport] if isinstance(transport, Transport) else list(transport)
         try:
+            if not transports:
+                raise UsageError("no endpoint")
             v = vehicle if isinstance(vehicle, VehicleParams) else load_vehicle(vehicle)
             if model is not None:
                 v = v.with_model(model)
             ticks = control_period_s * loop_rate_hz
-            if not control_period_s > 0 or abs(ticks - round(ticks)) > 1e-6 or round(ticks) < 1:
+            if not 0 < control_period_s < math.inf or abs(ticks - round(ticks)) > 1e-6 or round(ticks) < 1:
                 raise UsageError(f"control period {control_period_s!r} s is not a multiple of the "
                                  f"{1000 / loop_rate_hz:g} ms inner-loop period")
             try:
@@ -115,25 +141,25 @@ class SitlServer:
                                       loop_rate_hz=loop_rate_hz, prearm_delay_s=prearm_delay_s)
             except ValueError as exc:
                 raise UsageError(str(exc)) from None
+            self.counters = LinkCounters()
+            self.endpoint = MavlinkEndpoint(int(self.sim.params["SYSID_THISMAV"]), 1, signing_key, self.counters,
+                                            signing_state)
         except BaseException:
-            transport.close()
+            for t in transports:
+                t.close()
             raise
-        self.transport = transport
+        self.transport = transports[0]
         self.vehicle = v
         self.lockstep = lockstep
         self.control_period_s = control_period_s
         self._ticks_per_step = int(round(ticks))
         self.clock: Clock = clock or MonotonicClock()
-        self.counters = LinkCounters()
-        self.endpoint = MavlinkEndpoint(int(self.sim.params["SYSID_THISMAV"]), 1, signing_key, self.counters)
-        self.streams = StreamScheduler()
+        self.links = Links(transports, self.endpoint, self.counters, radio, seed)
         self._tcounters = TelemetryCounters()
-        self.dispatcher = Dispatcher(self.sim, self.streams, self.endpoint, self._tcounters)
-        self.radio = RadioLink(radio, seed) if radio is not None and radio.active else None
+        # the dispatcher's own scheduler is a fallback; every message comes with its link's
+        self.dispatcher = Dispatcher(self.sim, StreamScheduler(), self.endpoint, self._tcounters)
         self.steps = 0
         self.overruns = 0
-        self._out: list[bytes] = []
-        self._greet = False
         self._lock = threading.RLock()
         self._stop = threading.Event()
         self._wake_r, self._wake_w = socket.socketpair()
@@ -146,9 +172,19 @@ class SitlServer:
 
     # ------------------------------------------------------------------ public API
     @property
+    def transports(self) -> list[Transport]:
+        """The endpoints, in order."""
+        return self.links.transports
+
+    @property
     def connection_string(self) -> str:
-        """What the ground station passes to ``mavutil.mavlink_connection``."""
+        """What the ground station passes to ``mavutil.mavlink_connection`` (the first endpoint's)."""
         return self.transport.connection_string
+
+    @property
+    def connection_strings(self) -> list[str]:
+        """One connection string per endpoint."""
+        return [t.connection_string for t in self.links.transports]
 
     @property
     def time_s(self) -> float:
@@ -164,7 +200,7 @@ class SitlServer:
                 "failsafe": ap.failsafe, "kinematics": self.sim.world.kinematics, "on_ground": self.sim.world.on_ground,
                 "battery": self.sim.world.battery, "steps": self.steps, "overruns": self.overruns,
                 "targets_accepted": ap.targets_accepted, "targets_rejected": ap.targets_rejected,
-                "counters": self.counters.as_dict(),
+                "counters": self.counters.as_dict(), "links": len(self.links),
             }
 
     def start(self) -> "SitlServer":
@@ -204,10 +240,11 @@ class SitlServer:
             raise err
 
     def close(self) -> None:
-        """Release the transport and wake-up sockets (idempotent; stop the loop first)."""
+        """Save the signing state, release the transports and wake-up sockets (idempotent; stop the loop first)."""
         if not self._closed:
             self._closed = True
-            self.transport.close()
+            self.endpoint.persist_signing(force=True)
+            self.links.close()
             self._wake_r.close()
             self._wake_w.close()
 
@@ -222,7 +259,7 @@ class SitlServer:
         self.running = True
         try:
             with self._lock:
-                self._queue(heartbeat(self.sim))
+                self.links.queue_all(heartbeat(self.sim))
                 self._flush(self.clock.monotonic_ns())
             if self.lockstep:
                 self._run_lockstep()
@@ -266,19 +303,18 @@ class SitlServer:
                     steps_seen = self.steps
                     last_hb = now
                 elif now - last_hb >= 1_000_000_000:
-                    self._queue(heartbeat(self.sim))
+                    self.links.queue_all(heartbeat(self.sim))
                     last_hb = now
                 self._flush(now)
             self._wait(last_hb + 1_000_000_000)
 
     def _wait(self, until_ns: int) -> None:
-        if self.radio is not None:
-            t = self.radio.next_event_ns()
-            if t is not None and t < until_ns:
-                until_ns = t
+        t = self.links.next_event_ns()
+        if t is not None and t < until_ns:
+            until_ns = t
         timeout = max(0.0, (until_ns - self.clock.monotonic_ns()) * 1e-9)
-        rlist = [*self.transport.filenos(), self._wake_r.fileno()]
-        wlist = self.transport.write_filenos()
+        rlist = [*self.links.filenos(), self._wake_r.fileno()]
+        wlist = self.links.write_filenos()
         try:
             r, w, _ = select.select(rlist, wlist, [], timeout)
         except (OSError, ValueError) as exc:  # a descriptor closed under us: retry next loop
@@ -291,71 +327,64 @@ class SitlServer:
             except (BlockingIOError, InterruptedError):
                 pass
         if w:
-            self.transport.flush()
+            self.links.flush_transports()
 
     # ------------------------------------------------------------------ I/O
-    def _poll_input(self, now_ns: int) -> list[tuple[Any, bytes, bool]]:
-        items = self.transport.receive()
-        for peer in self.transport.take_gone_peers():
-            self.endpoint.forget(peer)
-        if self.transport.take_new_peers():
-            # greet after this input is processed (a signed first message sets our signing timestamp)
-            self._greet = True
-        if self.radio is None:
-            return items
-        for peer, data, dg in items:
-            if not self.radio.up.push((peer, dg), data, now_ns):
-                self.counters.lost_in += 1
-        return [(peer, data, dg) for (peer, dg), data in self.radio.up.pop_ready(now_ns)]
+    def _poll_input(self, now_ns: int) -> list[tuple[LinkKey, bytes, bool]]:
+        return self.links.poll(now_ns)
 
-    def _process(self, items: list[tuple[Any, bytes, bool]]) -> None:
-        for peer, data, datagram in items:
-            for msg in self.endpoint.decode(peer, data, datagram):
-                replies, step = self.dispatcher.handle(msg)
+    def _process(self, items: list[tuple[LinkKey, bytes, bool]]) -> None:
+        """Decode and handle input: ``(link key, data, is_datagram)`` items."""
+        for key, data, datagram in items:
+            msgs = self.endpoint.decode(key, data, datagram)
+            if not msgs:
+                continue
+            streams = self.links.link(key).streams
+            for msg in msgs:
+                replies, step = self.dispatcher.handle(msg, streams)
                 for r in replies:
-                    self._queue(r)
+                    self.links.queue(key, r)
                 self._drain_events()
                 if step and self.lockstep:
                     self._step()
                     self._flush(self.clock.monotonic_ns())
 
     def _greet_new_peers(self) -> None:
-        if self._greet:
-            self._greet = False
-            self._queue(heartbeat(self.sim))
-
-    def _queue(self, msg: mavlink.MAVLink_message) -> None:
-        self._out.append(self.endpoint.encode(msg))
+        # after the input that revealed them was handled
+        greet = self.links.take_greetings()
+        if greet:
+            hb = heartbeat(self.sim)
+            for key in greet:
+                self.links.queue(key, hb)
 
     def _flush(self, now_ns: int) -> None:
-        frames, self._out = self._out, []
-        if self.radio is not None:
-            for f in frames:
-                if not self.radio.down.push(None, f, now_ns):
-                    self.counters.lost_out += 1
-            frames = [f for _, f in self.radio.down.pop_ready(now_ns)]
-        if frames:
-            self.counters.dropped_out += self.transport.send(frames)
+        self.links.flush(now_ns)
+        self.endpoint.persist_signing()
 
     def _drain_events(self) -> None:
         ev = self.sim.autopilot.events
         if ev:
             for severity, text in ev:
-                self._queue(mavlink.MAVLink_statustext_message(severity, text.encode("ascii", "replace"), 0, 0))
+                self.links.queue_all(mavlink.MAVLink_statustext_message(severity, text.encode("ascii", "replace"),
+                                                                         0, 0))
             ev.clear()
 
     # ------------------------------------------------------------------ simulation
     def _tick(self) -> None:
         sim = self.sim
         sim.tick()
-        due = self.streams.due(sim.time_ns)
-        if due:
-            if mavlink.MAVLINK_MSG_ID_SYS_STATUS in due:
-                self.dispatcher.sync_counters()
+        built: dict[int, mavlink.MAVLink_message | None] = {}
+        now = sim.time_ns
+        for key, ln in self.links.links.items():
+            due = ln.streams.due(now)
             for mid in due:
-                m = build(mid, sim, self._tcounters)
+                if mid not in built:
+                    if mid == mavlink.MAVLINK_MSG_ID_SYS_STATUS:
+                        self.dispatcher.sync_counters()
+                    built[mid] = build(mid, sim, self._tcounters)
+                m = built[mid]
                 if m is not None:
-                    self._queue(m)
+                    self.links.queue(key, m)
         self._drain_events()
 
     def _step(self) -> None:

@@ -44,6 +44,13 @@ class InitialConditions:
     pitch_deg: float = 0.0
     yaw_deg: float = 0.0
 
+    def __post_init__(self) -> None:
+        for name in ("altitude_m", "roll_deg", "pitch_deg", "yaw_deg"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"initial {name} must be finite, got {getattr(self, name)!r}")
+        if self.altitude_m < 0.0:
+            raise ValueError(f"initial altitude_m must be >= 0, got {self.altitude_m!r}")
+
     def state(self) -> RigidBodyState:
         """The rigid-body state."""
         return initial_state(self.altitude_m, math.radians(self.roll_deg), math.radians(self.pitch_deg),

@@ -3,8 +3,13 @@
 Like ArduCopter, nothing but HEARTBEAT (1 Hz) is sent until a stream is
 requested.  A request at time ``t`` for interval ``T`` sends the message at
 ``t + T, t + 2T, ...`` (checked every inner-loop tick, so the fastest rate is
-the loop rate).  In lockstep with a 10 ms control period, an interval of
-10 ms therefore gives exactly one message per step, at its end.
+the loop rate); repeating a request for the interval already set keeps the
+schedule (MAVProxy repeats its REQUEST_DATA_STREAM every 15 s).  In lockstep
+with a 10 ms control period, an interval of 10 ms therefore gives exactly one
+message per step, at its end.
+
+The server keeps one scheduler per link (UDP sender, TCP connection, serial
+line), as ArduPilot keeps stream rates per channel.
 
 REQUEST_DATA_STREAM groups (ArduPilot's ``SRn_*`` parameters)::
 
@@ -19,6 +24,8 @@ REQUEST_DATA_STREAM groups (ArduPilot's ``SRn_*`` parameters)::
 """
 
 from __future__ import annotations
+
+import math
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -53,9 +60,10 @@ class StreamScheduler:
     def set_interval_us(self, msg_id: int, interval_us: float, now_ns: int) -> bool:
         """Set the interval of ``msg_id``: > 0 us, 0 = default rate, -1 (any < 0) = stop.
 
-        Returns False for messages this SITL cannot stream.
+        Returns False for messages this SITL cannot stream and for a NaN or
+        infinite interval.  The interval already set keeps its due time.
         """
-        if msg_id not in SUPPORTED_MESSAGES:
+        if msg_id not in SUPPORTED_MESSAGES or not math.isfinite(interval_us):
             return False
         if interval_us < 0:
             self._interval_ns.pop(msg_id, None)
@@ -63,7 +71,10 @@ class StreamScheduler:
         else:
             iv = int(interval_us * 1000) if interval_us > 0 else (
                 HEARTBEAT_INTERVAL_US * 1000 if msg_id == M.MAVLINK_MSG_ID_HEARTBEAT else DEFAULT_INTERVAL_US * 1000)
-            self._interval_ns[msg_id] = max(iv, 1)
+            iv = max(iv, 1)
+            if self._interval_ns.get(msg_id) == iv:
+                return True
+            self._interval_ns[msg_id] = iv
             self._due_ns[msg_id] = now_ns + iv
         self._order = sorted(self._interval_ns)
         return True
@@ -76,7 +87,9 @@ class StreamScheduler:
         return -1 if iv is None else iv // 1000
 
     def set_group_rate(self, stream_id: int, rate_hz: float, now_ns: int) -> bool:
-        """REQUEST_DATA_STREAM: every message of the group at ``rate_hz`` (0 = stop)."""
+        """REQUEST_DATA_STREAM: every message of the group at ``rate_hz`` (0 = stop); False if unknown or not finite."""
+        if not math.isfinite(rate_hz):
+            return False
         if stream_id == M.MAV_DATA_STREAM_ALL:
             groups = list(STREAM_GROUPS)
         elif stream_id in STREAM_GROUPS:

@@ -8,13 +8,19 @@ link emulation (baud, loss, latency) :mod:`sitl.radio`'s.
   ``remote``: the vehicle sends there, like ArduPilot's ``--out``) or
   ``udpout:`` (no remote: the vehicle answers whoever sent to its bound port;
   the ground station must send first).  Every datagram is parsed on its own.
+  Each sender address is a peer (at most 8; the one heard from least
+  recently, never ``remote``, makes room).
 * :class:`TcpTransport`: a TCP server (``tcp:HOST:PORT`` for the ground
-  station); several clients may connect, all get the telemetry.
+  station); several clients may connect, each connection is a peer.
 * :class:`PtyTransport`: a pseudo-terminal in raw mode; the ground station
   opens :attr:`PtyTransport.device` (like ``/dev/ttyUSB0``) at any baud.
   Until the ground station has sent something (or after it has been silent
   for 5 s) unread output is discarded before each write, so a late opener
-  does not read seconds of stale telemetry.
+  does not read seconds of stale telemetry.  The line is one peer, ``"serial"``.
+
+A peer is what :meth:`Transport.receive` reports with the data and what
+:meth:`Transport.send_to` takes: the server keeps one link (parser, stream
+rates, sequence numbers) per peer.
 """
 
 from __future__ import annotations
@@ -74,8 +80,16 @@ class Transport(ABC):
         """Everything readable now: ``(peer, data, is_datagram)``; never blocks."""
 
     @abstractmethod
+    def peers(self) -> list[Hashable]:
+        """The peers output can be sent to now."""
+
+    @abstractmethod
+    def send_to(self, peer: Hashable, frames: list[bytes]) -> int:
+        """Send frames to one peer; returns the number of frames dropped (all of them for an unknown peer)."""
+
     def send(self, frames: list[bytes]) -> int:
-        """Send frames to every peer; returns the number of frames dropped."""
+        """Send the same frames to every peer; returns the number of frames dropped."""
+        return sum(self.send_to(peer, frames) for peer in self.peers())
 
     def flush(self) -> None:
         """Retry output that did not fit into the kernel buffers."""
@@ -148,40 +162,41 @@ class UdpTransport(Transport):
                     break
                 log.debug("udp recv: %s", exc)
                 continue
-            if addr not in self._peers:
+            fixed = self._peers.pop(addr, None)
+            if fixed is None:  # a new sender: the one heard from least recently (not remote) makes room
+                fixed = False
                 if len(self._peers) >= _MAX_UDP_PEERS:
-                    for old, fixed in list(self._peers.items()):
-                        if not fixed:
-                            del self._peers[old]
-                            self._gone_peers.append(old)
-                            break
-                self._peers[addr] = False
+                    old = next((a for a, f in self._peers.items() if not f), None)
+                    if old is not None:
+                        del self._peers[old]
+                        self._gone_peers.append(old)
                 self._new_peers.append(addr)
+            self._peers[addr] = fixed  # (re)inserted last: the dict is in order of the last datagram
             out.append((addr, data, True))
         return out
 
-    def send(self, frames: list[bytes]) -> int:
-        if not frames or not self._peers:
+    def peers(self) -> list[Hashable]:
+        return list(self._peers)
+
+    def send_to(self, peer: Hashable, frames: list[bytes]) -> int:
+        if not frames:
             return 0
-        datagrams: list[bytes] = []
-        cur = bytearray()
+        if peer not in self._peers:
+            return len(frames)
+        datagrams: list[bytearray] = [bytearray()]
         for f in frames:
-            if cur and len(cur) + len(f) > _UDP_PAYLOAD:
-                datagrams.append(bytes(cur))
-                cur = bytearray()
-            cur += f
-        if cur:
-            datagrams.append(bytes(cur))
+            if datagrams[-1] and len(datagrams[-1]) + len(f) > _UDP_PAYLOAD:
+                datagrams.append(bytearray())
+            datagrams[-1] += f
         dropped = 0
-        for addr in list(self._peers):
-            for d in datagrams:
-                try:
-                    self._sock.sendto(d, addr)
-                except ConnectionRefusedError:
-                    continue
-                except OSError as exc:  # buffer full or unreachable: the datagram is lost
-                    log.debug("udp send to %s: %s", addr, exc)
-                    dropped += 1
+        for d in datagrams:
+            try:
+                self._sock.sendto(d, peer)
+            except ConnectionRefusedError:
+                continue
+            except OSError as exc:  # buffer full or unreachable: the datagram is lost
+                log.debug("udp send to %s: %s", peer, exc)
+                dropped += 1
         return dropped
 
     def close(self) -> None:
@@ -246,18 +261,20 @@ class TcpTransport(Transport):
             raise TransportError(f"cannot listen on tcp {bind[0]}:{bind[1]}: {exc.strerror or exc}") from None
         self._srv.setblocking(False)
         self.address: tuple[str, int] = self._srv.getsockname()
-        self._clients: dict[int, tuple[socket.socket, _Stream]] = {}
+        # peer ("tcp", n): n counts connections, so a reused descriptor is a new peer
+        self._clients: dict[tuple[str, int], tuple[socket.socket, _Stream]] = {}
+        self._accepted = 0
 
     def filenos(self) -> list[int]:
-        return [self._srv.fileno(), *self._clients]
+        return [self._srv.fileno(), *(st.fd for _, st in self._clients.values())]
 
     def write_filenos(self) -> list[int]:
-        return [fd for fd, (_, st) in self._clients.items() if st.pending]
+        return [st.fd for _, st in self._clients.values() if st.pending]
 
-    def _drop(self, fd: int) -> None:
-        sock, _ = self._clients.pop(fd)
+    def _drop(self, peer: tuple[str, int]) -> None:
+        sock, _ = self._clients.pop(peer)
         sock.close()
-        self._gone_peers.append(("tcp", fd))
+        self._gone_peers.append(peer)
 
     def receive(self) -> list[tuple[Hashable, bytes, bool]]:
         while True:
@@ -270,11 +287,12 @@ class TcpTransport(Transport):
                 break
             sock.setblocking(False)
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            fd = sock.fileno()
-            self._clients[fd] = (sock, _Stream(fd, sock.send))
-            self._new_peers.append(("tcp", fd))
+            self._accepted += 1
+            peer = ("tcp", self._accepted)
+            self._clients[peer] = (sock, _Stream(sock.fileno(), sock.send))
+            self._new_peers.append(peer)
         out: list[tuple[Hashable, bytes, bool]] = []
-        for fd, (sock, _) in list(self._clients.items()):
+        for peer, (sock, _) in list(self._clients.items()):
             while True:
                 try:
                     data = sock.recv(65536)
@@ -283,31 +301,34 @@ class TcpTransport(Transport):
                 except OSError:
                     data = b""
                 if not data:
-                    self._drop(fd)
+                    self._drop(peer)
                     break
-                out.append((("tcp", fd), data, False))
+                out.append((peer, data, False))
         return out
 
-    def send(self, frames: list[bytes]) -> int:
+    def peers(self) -> list[Hashable]:
+        return list(self._clients)
+
+    def send_to(self, peer: Hashable, frames: list[bytes]) -> int:
         if not frames:
             return 0
-        data = b"".join(frames)
-        dropped = 0
-        for fd, (_, st) in list(self._clients.items()):
-            if not st.push(data):
-                dropped += len(frames)
-            if not st.flush():
-                self._drop(fd)
+        client = self._clients.get(peer)  # type: ignore[call-overload]
+        if client is None:
+            return len(frames)
+        st = client[1]
+        dropped = 0 if st.push(b"".join(frames)) else len(frames)
+        if not st.flush():
+            self._drop(peer)  # type: ignore[arg-type]
         return dropped
 
     def flush(self) -> None:
-        for fd, (_, st) in list(self._clients.items()):
+        for peer, (_, st) in list(self._clients.items()):
             if st.pending and not st.flush():
-                self._drop(fd)
+                self._drop(peer)
 
     def close(self) -> None:
-        for fd in list(self._clients):
-            self._clients.pop(fd)[0].close()
+        for peer in list(self._clients):
+            self._clients.pop(peer)[0].close()
         self._srv.close()
 
     @property
@@ -363,9 +384,14 @@ class PtyTransport(Transport):
             self._last_rx_ns = self._clock_ns()
         return out
 
-    def send(self, frames: list[bytes]) -> int:
+    def peers(self) -> list[Hashable]:
+        return ["serial"]
+
+    def send_to(self, peer: Hashable, frames: list[bytes]) -> int:
         if not frames:
             return 0
+        if peer != "serial":
+            return len(frames)
         now = self._clock_ns()
         if self._last_rx_ns is None or now - self._last_rx_ns > _PTY_STALE_NS:
             try:

@@ -23,6 +23,7 @@ from above, i.e. positive yaw) and ``k = rotors.yaw_moment_m``.
 from __future__ import annotations
 
 import math
+import reprlib
 import tomllib
 from dataclasses import dataclass, field, fields, replace
 from importlib import resources
@@ -34,6 +35,7 @@ from sitl.errors import VehicleConfigError
 __all__ = [
     "VehicleParams", "RotorParams", "DragParams", "BatteryParams", "SensorParams6", "ControlParams",
     "HomeParams", "MODELS", "load_vehicle", "parse_vehicle", "bundled_vehicles", "DEFAULT_VEHICLE",
+    "Bound", "OutOfBounds", "VEHICLE_BOUNDS", "short_repr",
 ]
 
 MODELS = ("rigid_body", "reduced")
@@ -267,6 +269,136 @@ class VehicleParams:
         return replace(self, model=model)
 
 
+# --------------------------------------------------------------------------- ranges
+
+class OutOfBounds(ValueError):
+    """A value is not a finite number in its :class:`Bound` (the message says why)."""
+
+
+_REPR = reprlib.Repr()
+_REPR.maxlevel, _REPR.maxlist, _REPR.maxdict, _REPR.maxstring, _REPR.maxother = 3, 6, 4, 40, 40
+
+
+def short_repr(value: Any) -> str:
+    """``repr(value)`` cut short (deeply nested or huge values make no message unreadable)."""
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) > 10 ** 30:
+        return f"a {'negative ' if value < 0 else ''}{len(str(abs(value)))}-digit integer"
+    return _REPR.repr(value)
+
+
+def _fmt(x: float) -> str:
+    return str(x) if isinstance(x, int) else f"{x:g}"
+
+
+@dataclass(frozen=True)
+class Bound:
+    """The closed range ``[lo, hi]`` a number read from a file must lie in, with its unit and why.
+
+    Attributes
+    ----------
+    lo, hi : float
+        Smallest and largest allowed value.
+    unit : str
+        SI unit of the value ("" for none), shown in messages.
+    why : str
+        What the range stands for, shown in messages.
+    integer : bool
+        Only whole numbers (TOML integers) are allowed.
+    """
+
+    lo: float
+    hi: float
+    unit: str = ""
+    why: str = ""
+    integer: bool = False
+
+    def describe(self) -> str:
+        """``"allowed [lo, hi] unit (why)"``."""
+        unit = f" {self.unit}" if self.unit else ""
+        return f"allowed [{_fmt(self.lo)}, {_fmt(self.hi)}]{unit} ({self.why})"
+
+    def check(self, value: Any) -> float | int:
+        """``value`` as a float (an int for integer bounds) when it is a finite number in range.
+
+        Raises
+        ------
+        OutOfBounds
+            Not a number, not finite, or out of range; the message gives the allowed range.
+        """
+        kind = "an integer" if self.integer else "a number"
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or (self.integer and not isinstance(value, int)):
+            raise OutOfBounds(f"must be {kind}, got {short_repr(value)}; {self.describe()}")
+        unit = f" {self.unit}" if self.unit else ""
+        try:
+            v = value if self.integer else float(value)
+        except OverflowError:
+            raise OutOfBounds(f"must be at most {_fmt(self.hi)}{unit}, got {short_repr(value)}; "
+                              f"{self.describe()}") from None
+        if not math.isfinite(v):
+            raise OutOfBounds(f"must be finite, got {v!r}; {self.describe()}")
+        if v < self.lo:
+            if self.integer:
+                head = f"must be >= {_fmt(self.lo)}"
+            elif self.lo > 0 >= v:
+                head = "must be > 0"
+            elif self.lo == 0:
+                head = "must be >= 0"
+            else:
+                head = f"must be at least {_fmt(self.lo)}{unit}"
+            raise OutOfBounds(f"{head}, got {_fmt(v)}; {self.describe()}")
+        if v > self.hi:
+            raise OutOfBounds(f"must be at most {_fmt(self.hi)}{unit}, got {_fmt(v)}; {self.describe()}")
+        return v
+
+
+_NOISE_M = Bound(0.0, 10.0, "m", "sensor noise or resolution; 0 = none")
+_GAIN = Bound(0.0, 1000.0, "1/s", "an inner-loop gain of the 400 Hz autopilot")
+_IGAIN = Bound(0.0, 1e4, "1/s^2", "an integral gain")
+_THRUST = Bound(0.0, 1e4, "N", "one rotor's thrust")
+_DRAG = Bound(0.0, 100.0, "N/(m/s)", "linear air drag")
+
+#: Allowed range of every number of a vehicle file, by key (``section.key``; vectors element by element).
+VEHICLE_BOUNDS: dict[str, Bound] = {
+    "vehicle.mass_kg": Bound(0.01, 100.0, "kg", "a quadrotor of 10 g to 100 kg"),
+    "vehicle.gravity_m_s2": Bound(1.0, 30.0, "m/s^2", "surface gravity; Earth 9.81"),
+    "vehicle.inertia_kg_m2": Bound(1e-6, 1e3, "kg m^2", "a principal moment of inertia"),
+    "rotors.arm_length_m": Bound(0.01, 5.0, "m", "centre to rotor axis"),
+    "rotors.max_thrust_n": Bound(0.01, 1e4, "N", "one rotor's thrust"),
+    "rotors.min_thrust_n": _THRUST, "rotors.idle_thrust_n": _THRUST,
+    "rotors.time_constant_s": Bound(1e-3, 2.0, "s", "motor and propeller lag"),
+    "rotors.yaw_moment_m": Bound(1e-4, 1.0, "m", "reaction torque per thrust"),
+    "rotors.diameter_m": Bound(0.01, 5.0, "m", "propeller diameter"),
+    "rotors.figure_of_merit": Bound(0.05, 1.0, "", "ideal over shaft power"),
+    "rotors.electrical_efficiency": Bound(0.05, 1.0, "", "shaft over electrical power"),
+    "drag.linear_n_per_m_s": _DRAG, "drag.vertical_n_per_m_s": _DRAG,
+    "drag.quadratic_n_per_m2_s2": Bound(0.0, 10.0, "N/(m/s)^2", "quadratic air drag"),
+    "drag.rotational_n_m_s": Bound(0.0, 10.0, "N m/(rad/s)", "rotational damping"),
+    "battery.cells": Bound(1, 23, "cells", "at most 100 V at 4.2 V a cell", integer=True),
+    "battery.capacity_mah": Bound(10.0, 1e6, "mAh", "the range of BATT_CAPACITY"),
+    "battery.internal_resistance_ohm": Bound(0.0, 10.0, "ohm", "pack resistance"),
+    "battery.initial_charge": Bound(0.0, 1.0, "", "state of charge"),
+    "battery.avionics_current_a": Bound(0.0, 100.0, "A", "electronics draw"),
+    "sensors.attitude_noise_std_rad": Bound(0.0, 0.5, "rad", "IMU attitude noise; 0 = none"),
+    "sensors.rate_noise_std_rad_s": Bound(0.0, 10.0, "rad/s", "gyro noise; 0 = none"),
+    "sensors.baro_noise_std_m": _NOISE_M, "sensors.baro_resolution_m": _NOISE_M,
+    "sensors.position_noise_std_m": _NOISE_M,
+    "sensors.velocity_noise_std_m_s": Bound(0.0, 10.0, "m/s", "velocity noise; 0 = none"),
+    "sensors.rangefinder_noise_std_m": _NOISE_M, "sensors.rangefinder_resolution_m": _NOISE_M,
+    "sensors.rangefinder_max_m": Bound(0.1, 1000.0, "m", "rangefinder range"),
+    "control.rate_p_1_s": _GAIN, "control.rate_i_1_s2": _IGAIN,
+    "control.rate_imax_rad_s2": Bound(0.0, 1e4, "rad/s^2", "rate integrator clamp"),
+    "control.climb_p_1_s": _GAIN, "control.climb_i_1_s2": _IGAIN, "control.land_damping_1_s": _GAIN,
+    "home.lat_deg": Bound(-90.0, 90.0, "deg", "latitude"),
+    "home.lon_deg": Bound(-180.0, 180.0, "deg", "longitude"),
+    "home.alt_m": Bound(-500.0, 1e4, "m", "altitude above mean sea level"),
+}
+_INERTIA_ENTRY = Bound(-1e3, 1e3, "kg m^2", "an entry of the inertia matrix")
+#: Fastest physical rates the 1 ms physics step integrates stably: drag and damping time constants
+#: of at least 2 ms, angular accelerations (max torque / inertia) up to 1e5 rad/s^2.
+MAX_DAMPING_1_S = 500.0
+MAX_ANGULAR_ACCEL_RAD_S2 = 1e5
+
+
 # --------------------------------------------------------------------------- loader
 
 _SECTIONS = {
@@ -275,96 +407,83 @@ _SECTIONS = {
 }
 _VEHICLE_KEYS = ("name", "description", "model", "mass_kg", "gravity_m_s2", "inertia_kg_m2")
 _REQUIRED = {"vehicle": ("mass_kg", "inertia_kg_m2"), "rotors": ("arm_length_m", "max_thrust_n")}
-
-# key -> check: "pos" (> 0), "nonneg" (>= 0), "frac" (0..1], "unit" ([0, 1]), "any", "int_pos", "bool", "vec3_nonneg"
-_CHECKS: dict[str, str] = {
-    "mass_kg": "pos", "gravity_m_s2": "pos",
-    "arm_length_m": "pos", "max_thrust_n": "pos", "min_thrust_n": "nonneg", "idle_thrust_n": "nonneg",
-    "time_constant_s": "pos", "yaw_moment_m": "pos", "diameter_m": "pos", "figure_of_merit": "frac",
-    "electrical_efficiency": "frac",
-    "linear_n_per_m_s": "nonneg", "vertical_n_per_m_s": "nonneg", "quadratic_n_per_m2_s2": "nonneg",
-    "rotational_n_m_s": "nonneg",
-    "cells": "int_pos", "capacity_mah": "pos", "internal_resistance_ohm": "nonneg", "initial_charge": "unit",
-    "avionics_current_a": "nonneg",
-    "attitude_noise_std_rad": "nonneg", "rate_noise_std_rad_s": "nonneg", "baro_noise_std_m": "nonneg",
-    "baro_resolution_m": "nonneg", "position_noise_std_m": "nonneg", "velocity_noise_std_m_s": "nonneg",
-    "rangefinder": "bool", "rangefinder_noise_std_m": "nonneg", "rangefinder_resolution_m": "nonneg",
-    "rangefinder_max_m": "pos",
-    "rate_p_1_s": "vec3_nonneg", "rate_i_1_s2": "vec3_nonneg", "rate_imax_rad_s2": "nonneg",
-    "climb_p_1_s": "nonneg", "climb_i_1_s2": "nonneg", "land_damping_1_s": "nonneg",
-    "lat_deg": "lat", "lon_deg": "lon", "alt_m": "any",
-}
+_BOOLEANS = ("sensors.rangefinder",)
+_VECTORS = ("control.rate_p_1_s", "control.rate_i_1_s2")
 
 
-def _is_number(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-
-def _check(source: str, key: str, name: str, value: Any) -> Any:
-    kind = _CHECKS[name]
-    fail = lambda reason: VehicleConfigError(source, key, reason)  # noqa: E731
-    if kind == "bool":
+def _check(source: str, key: str, value: Any) -> Any:
+    """``value`` of ``key`` checked against :data:`VEHICLE_BOUNDS` (booleans and 3-vectors too)."""
+    if key in _BOOLEANS:
         if not isinstance(value, bool):
-            raise fail(f"must be true or false, got {value!r}")
+            raise VehicleConfigError(source, key, f"must be true or false, got {short_repr(value)}")
         return value
-    if kind == "int_pos":
-        if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-            raise fail(f"must be a positive integer, got {value!r}")
-        return value
-    if kind == "vec3_nonneg":
-        if not (isinstance(value, list) and len(value) == 3 and all(_is_number(v) for v in value)):
-            raise fail(f"must be a list of 3 numbers, got {value!r}")
-        vec = tuple(float(v) for v in value)
-        if not all(math.isfinite(v) and v >= 0 for v in vec):
-            raise fail(f"must be finite and >= 0, got {value!r}")
-        return vec
-    if not _is_number(value):
-        raise fail(f"must be a number, got {value!r}")
-    v = float(value)
-    if not math.isfinite(v):
-        raise fail(f"must be finite, got {value!r}")
-    if kind == "pos" and not v > 0:
-        raise fail(f"must be > 0, got {value!r}")
-    if kind == "nonneg" and v < 0:
-        raise fail(f"must be >= 0, got {value!r}")
-    if kind == "frac" and not 0 < v <= 1:
-        raise fail(f"must be in (0, 1], got {value!r}")
-    if kind == "unit" and not 0 <= v <= 1:
-        raise fail(f"must be in [0, 1], got {value!r}")
-    if kind == "lat" and not -90 <= v <= 90:
-        raise fail(f"must be in [-90, 90], got {value!r}")
-    if kind == "lon" and not -180 <= v <= 180:
-        raise fail(f"must be in [-180, 180], got {value!r}")
-    return v
+    bound = VEHICLE_BOUNDS[key]
+    try:
+        if key in _VECTORS:
+            if not (isinstance(value, list) and len(value) == 3):
+                raise OutOfBounds(f"must be a list of 3 numbers (roll, pitch, yaw), got {short_repr(value)}; "
+                                  f"{bound.describe()}")
+            return tuple(bound.check(v) for v in value)
+        return bound.check(value)
+    except OutOfBounds as exc:
+        raise VehicleConfigError(source, key, str(exc)) from None
 
 
 def _inertia(source: str, value: Any) -> Mat3:
     key = "vehicle.inertia_kg_m2"
-    if isinstance(value, list) and len(value) == 3 and all(_is_number(v) for v in value):
-        rows = [[float(value[0]), 0.0, 0.0], [0.0, float(value[1]), 0.0], [0.0, 0.0, float(value[2])]]
-    elif (isinstance(value, list) and len(value) == 3
-          and all(isinstance(r, list) and len(r) == 3 and all(_is_number(v) for v in r) for r in value)):
-        rows = [[float(v) for v in r] for r in value]
-    else:
-        raise VehicleConfigError(source, key, "must be 3 numbers (diagonal) or 3 rows of 3 numbers")
-    if not all(math.isfinite(v) for r in rows for v in r):
-        raise VehicleConfigError(source, key, "must be finite")
-    for i in range(3):
-        for j in range(i + 1, 3):
-            if abs(rows[i][j] - rows[j][i]) > 1e-12 * max(1.0, abs(rows[i][j])):
-                raise VehicleConfigError(source, key,
-                                         f"not symmetric ([{i}][{j}] = {rows[i][j]} != [{j}][{i}] = {rows[j][i]})")
-    a, b, c = rows[0][0], rows[1][1], rows[2][2]
-    m2 = a * b - rows[0][1] * rows[1][0]
-    det = (a * (b * c - rows[1][2] * rows[2][1]) - rows[0][1] * (rows[1][0] * c - rows[1][2] * rows[2][0])
-           + rows[0][2] * (rows[1][0] * rows[2][1] - b * rows[2][0]))
-    if not (a > 0 and m2 > 0 and det > 0):
-        raise VehicleConfigError(source, key, "not positive definite")
+    try:
+        if isinstance(value, list) and len(value) == 3 and not any(isinstance(v, list) for v in value):
+            d = [_INERTIA_ENTRY.check(v) for v in value]
+            rows = [[d[0], 0.0, 0.0], [0.0, d[1], 0.0], [0.0, 0.0, d[2]]]
+        elif isinstance(value, list) and len(value) == 3 and all(isinstance(r, list) and len(r) == 3 for r in value):
+            rows = [[_INERTIA_ENTRY.check(v) for v in r] for r in value]
+        else:
+            raise OutOfBounds("must be 3 numbers (diagonal) or 3 rows of 3 numbers")
+        for i in range(3):
+            for j in range(i + 1, 3):
+                if abs(rows[i][j] - rows[j][i]) > 1e-12 * max(1.0, abs(rows[i][j])):
+                    raise OutOfBounds(f"not symmetric ([{i}][{j}] = {rows[i][j]} != [{j}][{i}] = {rows[j][i]})")
+        a, b, c = rows[0][0], rows[1][1], rows[2][2]
+        m2 = a * b - rows[0][1] * rows[1][0]
+        det = (a * (b * c - rows[1][2] * rows[2][1]) - rows[0][1] * (rows[1][0] * c - rows[1][2] * rows[2][0])
+               + rows[0][2] * (rows[1][0] * rows[2][1] - b * rows[2][0]))
+        if not (a > 0 and m2 > 0 and det > 0):
+            raise OutOfBounds("not positive definite")
+        for i in range(3):
+            VEHICLE_BOUNDS[key].check(rows[i][i])
+    except OutOfBounds as exc:
+        raise VehicleConfigError(source, key, str(exc)) from None
     return tuple(tuple(r) for r in rows)  # type: ignore[return-value]
+
+
+def _check_rates(params: VehicleParams) -> None:
+    """Cross-checks: rotor thrusts, lift margin, and rates the physics step integrates stably."""
+    source, r, dr = params.source, params.rotors, params.drag
+    for k in ("min_thrust_n", "idle_thrust_n"):
+        if getattr(r, k) >= r.max_thrust_n:
+            raise VehicleConfigError(source, f"rotors.{k}", f"must be below max_thrust_n ({r.max_thrust_n})")
+    if params.hover_thrust_fraction >= 0.9:
+        raise VehicleConfigError(source, "rotors.max_thrust_n",
+                                 f"4 x {r.max_thrust_n} N cannot lift {params.mass_kg} kg with margin "
+                                 f"(hover at {params.hover_thrust_fraction:.2f} of full thrust)")
+    least_inertia = min(params.inertia_diagonal)
+    for key, rate in (("drag.linear_n_per_m_s", dr.linear_n_per_m_s / params.mass_kg),
+                      ("drag.vertical_n_per_m_s", dr.vertical_n_per_m_s / params.mass_kg),
+                      ("drag.rotational_n_m_s", dr.rotational_n_m_s / least_inertia)):
+        if rate > MAX_DAMPING_1_S:
+            raise VehicleConfigError(source, key, f"damps at {rate:g} 1/s for this mass and inertia: at most "
+                                                  f"{MAX_DAMPING_1_S:g} 1/s (a 2 ms time constant) integrates stably")
+    accel = max(t / i for t, i in zip(params.max_torque_nm, params.inertia_diagonal, strict=True))
+    if accel > MAX_ANGULAR_ACCEL_RAD_S2:
+        raise VehicleConfigError(source, "vehicle.inertia_kg_m2",
+                                 f"max torque / inertia = {accel:.3g} rad/s^2: at most {MAX_ANGULAR_ACCEL_RAD_S2:g} "
+                                 f"rad/s^2 is physical (inertia too small for the rotors)")
 
 
 def parse_vehicle(data: Mapping[str, Any], source: str = "<vehicle>") -> VehicleParams:
     """Validate a parsed vehicle TOML document.
+
+    Every number must be finite and in its range of :data:`VEHICLE_BOUNDS`.
 
     Parameters
     ----------
@@ -380,11 +499,13 @@ def parse_vehicle(data: Mapping[str, Any], source: str = "<vehicle>") -> Vehicle
     Raises
     ------
     VehicleConfigError
-        Naming ``source``, the offending key and the reason.
+        Naming ``source``, the offending key and the reason (with the allowed range).
     """
+    if not isinstance(data, Mapping):
+        raise VehicleConfigError(source, "", f"must be a table, got {short_repr(data)}")
     for section, value in data.items():
         if section not in _SECTIONS:
-            raise VehicleConfigError(source, section, f"unknown section (known: {', '.join(_SECTIONS)})")
+            raise VehicleConfigError(source, str(section), f"unknown section (known: {', '.join(_SECTIONS)})")
         if not isinstance(value, dict):
             raise VehicleConfigError(source, section, "must be a table")
     for section, keys in _REQUIRED.items():
@@ -400,33 +521,25 @@ def parse_vehicle(data: Mapping[str, Any], source: str = "<vehicle>") -> Vehicle
                 raise VehicleConfigError(source, f"{section}.{k}", f"unknown key (known: {', '.join(allowed)})")
         if cls is None:
             continue
-        kwargs = {k: _check(source, f"{section}.{k}", k, v) for k, v in table.items()}
+        kwargs = {k: _check(source, f"{section}.{k}", v) for k, v in table.items()}
         built[section] = cls(**kwargs)
     v = data.get("vehicle", {})
     kwargs: dict[str, Any] = {}
     for k in ("name", "description"):
         if k in v:
             if not isinstance(v[k], str):
-                raise VehicleConfigError(source, f"vehicle.{k}", f"must be a string, got {v[k]!r}")
+                raise VehicleConfigError(source, f"vehicle.{k}", f"must be a string, got {short_repr(v[k])}")
             kwargs[k] = v[k]
     if "model" in v:
-        if v["model"] not in MODELS:
-            raise VehicleConfigError(source, "vehicle.model", f"must be one of {MODELS}, got {v['model']!r}")
+        if not isinstance(v["model"], str) or v["model"] not in MODELS:
+            raise VehicleConfigError(source, "vehicle.model", f"must be one of {MODELS}, got {short_repr(v['model'])}")
         kwargs["model"] = v["model"]
     for k in ("mass_kg", "gravity_m_s2"):
         if k in v:
-            kwargs[k] = _check(source, f"vehicle.{k}", k, v[k])
+            kwargs[k] = _check(source, f"vehicle.{k}", v[k])
     kwargs["inertia_kg_m2"] = _inertia(source, v["inertia_kg_m2"])
-    r: RotorParams = built["rotors"]
-    if r.min_thrust_n >= r.max_thrust_n:
-        raise VehicleConfigError(source, "rotors.min_thrust_n", f"must be below max_thrust_n ({r.max_thrust_n})")
-    if r.idle_thrust_n >= r.max_thrust_n:
-        raise VehicleConfigError(source, "rotors.idle_thrust_n", f"must be below max_thrust_n ({r.max_thrust_n})")
     params = VehicleParams(source=source, **kwargs, **built)
-    if params.hover_thrust_fraction >= 0.9:
-        raise VehicleConfigError(source, "rotors.max_thrust_n",
-                                 f"4 x {r.max_thrust_n} N cannot lift {params.mass_kg} kg with margin "
-                                 f"(hover at {params.hover_thrust_fraction:.2f} of full thrust)")
+    _check_rates(params)
     return params
 
 
@@ -442,7 +555,7 @@ def load_vehicle(name_or_path: str | Path | None = None) -> VehicleParams:
     Raises
     ------
     VehicleConfigError
-        Unknown name, unreadable file, bad TOML or invalid values.
+        Unknown name, unreadable file, bad TOML (nesting too deep included) or invalid values.
     """
     spec = DEFAULT_VEHICLE if name_or_path is None else str(name_or_path)
     path = Path(spec)
@@ -452,6 +565,8 @@ def load_vehicle(name_or_path: str | Path | None = None) -> VehicleParams:
             text = path.read_text(encoding="utf-8")
         except OSError as exc:
             raise VehicleConfigError(source, "", f"cannot read ({exc.strerror})") from None
+        except UnicodeDecodeError as exc:
+            raise VehicleConfigError(source, "", f"invalid TOML (not UTF-8: {exc.reason})") from None
     else:
         stem = spec[:-5] if spec.endswith(".toml") else spec
         if "/" in spec or "\\" in spec or stem not in bundled_vehicles():
@@ -464,4 +579,6 @@ def load_vehicle(name_or_path: str | Path | None = None) -> VehicleParams:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise VehicleConfigError(source, "", f"invalid TOML ({exc})") from None
+    except RecursionError:
+        raise VehicleConfigError(source, "", "invalid TOML (arrays or tables nested too deeply)") from None
     return parse_vehicle(data, source)

@@ -42,6 +42,11 @@ class WindParams:
     gust_tau_s: float = 2.0
 
     def __post_init__(self) -> None:
+        for name in ("mean_speed_m_s", "vertical_m_s", "gust_std_m_s", "gust_tau_s"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"{name} must be finite, got {getattr(self, name)!r}")
+        if self.direction_deg is not None and not math.isfinite(self.direction_deg):
+            raise ValueError(f"direction_deg must be finite, got {self.direction_deg!r}")
         if self.mean_speed_m_s < 0:
             raise ValueError("mean_speed_m_s must be >= 0")
         if self.gust_std_m_s < 0:

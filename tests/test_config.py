@@ -180,3 +180,14 @@ def test_cli_exits_nonzero_with_the_key_and_no_traceback(tmp_path):
     assert p.returncode == 2
     assert "experiment.ts_s" in p.stderr and str(bad) in p.stderr
     assert "Traceback" not in p.stderr
+
+
+def test_the_package_keeps_every_public_name_of_gcs_config():
+    import gcs.config as config
+
+    used = ("Config", "PhaseConfig", "PdGains", "AFTER_HORIZON", "MATRIX_MODES", "bundled_configs", "load_config",
+            "parse_config", "resolve_config_path", "MatrixSet", "ExperimentConfig", "SimConfig", "EstimatorConfig",
+            "FlightConfig", "PHASE_KINDS", "LOC_SUBSYSTEMS", "NLSOC_SUBSYSTEMS", "MAX_HORIZON_STEPS")
+    assert set(used) <= set(config.__all__)
+    assert all(callable(getattr(config, n)) or getattr(config, n) is not None for n in config.__all__)
+    assert config.MAX_HORIZON_STEPS == 10_000_000 and config.LOC_SUBSYSTEMS["y_phi"] == (4, 1)

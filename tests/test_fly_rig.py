@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import signal
 import subprocess
 import sys
@@ -141,10 +142,25 @@ class _Excessive(RigFlight):
         super()._send_command(state, cmd)
 
 
+def test_the_output_guard_never_sends_an_excessive_command(rig):
+    link = RigLink(rig.connection_string)
+    flight = _Excessive(_short(), "pd", link, None)
+    flight.preflight()
+    result = flight.fly()
+    link.close()
+    snap = rig.snapshot()
+    assert result.exit_reason == "unsafe_command" and result.exit_code == 10
+    assert result.link["blocked"] == {"Control: thrust outside the vehicle's range": 1}
+    assert snap["cutoffs"] == 0
+    assert snap["state"] == RigState.DISARMED and snap["plant"].z <= 1e-6
+    assert any(e["text"] == "landed and disarmed" for e in result.events)
+
+
 def test_an_excessive_command_trips_the_rigs_cutoff_and_the_flight_stops(rig):
     link = RigLink(rig.connection_string)
     flight = _Excessive(_short(), "pd", link, None)
     flight.preflight()
+    link.guard = None  # what a ground station without the output guard would send: the rig's own cut-off acts
     result = flight.fly()
     link.close()
     snap = rig.snapshot()
@@ -179,3 +195,25 @@ def test_rig_link_budget_and_cli_refusals(tmp_path):
     p = subprocess.run([sys.executable, "-m", "gcs.cli", "fly", "--rig", "4dof", "--port", str(tmp_path / "nope")],
                        capture_output=True, text=True, timeout=60)
     assert p.returncode == 6 and "cannot open" in p.stderr
+
+
+def test_hostile_rig_messages_are_rejected_and_counted(rig):
+    from sitl import rig_protocol as rp
+
+    link = RigLink(rig.connection_string)
+    flight = RigFlight(_short(), "pd", link, None)
+    try:
+        flight._handle(rp.Ack(0x7F, 3, 0))  # an ACK of a message type that does not exist
+        good = rp.Telemetry(1000, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.1, 400, 0, 0)
+        flight._handle(good)
+        for bad in (rp.Telemetry(2000, float("nan"), 0.0, 0.0, 0.0, 0.0, 0.0, 0.1, 400, 0, 0),
+                    rp.Telemetry(3000, 0.0, 0.0, 0.0, float("inf"), 0.0, 0.0, 0.1, 400, 0, 0),
+                    rp.Telemetry(4000, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1e30, 400, 0, 0),
+                    rp.Telemetry(1000, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.1, 400, 0, 0)):  # no newer than the last
+            flight._handle(bad)
+        assert all(math.isfinite(v) for v in flight.estimator.state())
+        assert flight.validator.rejected == {"TELEMETRY: non-finite value": 2, "TELEMETRY: x out of range": 1,
+                                             "TELEMETRY: time stamp did not advance": 1}
+        assert any("unknown type 0x7f" in e["text"] for e in flight.events)
+    finally:
+        link.close()

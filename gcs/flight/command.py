@@ -4,14 +4,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
+import traceback
 from pathlib import Path
 
 from gcs.config import load_config
 from gcs.control import CONTROLLERS
 from gcs.flight.clock import MonotonicClock
 from gcs.flight.embedded import EmbeddedSitl
-from gcs.errors import LogError
+from gcs.errors import ConfigError, LogError
 from gcs.flight.fly import EXIT_CODES, Flight, FlightResult, PreflightRefused
 from gcs.flight.loop import Interrupts
 from gcs.flight.recorder import BYTES_PER_FLIGHT_TICK, FlightRecorder, utc_offset_ns
@@ -32,7 +34,8 @@ def add_fly_parser(sub, positive_int, positive_float) -> None:
         description="Preflight, GUIDED_NOGPS, arm, the config's mission at 100 Hz, LAND, disarm. With neither "
                     "--port nor --connect it flies the built-in SITL on loopback. Exit codes: 0 completed, "
                     "2 bad config/option, 3 telemetry lost, 4 geofence, 5 interrupted (landed), 6 link error, "
-                    "7 preflight refused, 8 immediate LAND (second Ctrl-C), 9 the vehicle left guided control.")
+                    "7 preflight refused, 8 immediate LAND (second Ctrl-C), 9 the vehicle left guided control, "
+                    "10 unsafe command caught before the wire, 11 internal error, 12 telemetry too slow.")
     f.add_argument("--controller", default="nlsoc", choices=CONTROLLERS, help="controller (default nlsoc)")
     f.add_argument("--config", default=None,
                    help=f"experiment config, path or bundled name (default {DEFAULT_FLY_CONFIG}; "
@@ -43,10 +46,11 @@ def add_fly_parser(sub, positive_int, positive_float) -> None:
     where = f.add_mutually_exclusive_group()
     where.add_argument("--port", metavar="DEVICE", help="serial device of the telemetry radio, e.g. /dev/ttyUSB0")
     where.add_argument("--connect", metavar="URL", help="pymavlink URL: udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT")
-    f.add_argument("--baud", type=positive_int, default=None,
+    f.add_argument("--baud", type=int_range(50, 20_000_000), default=None,
                    help="serial baud rate (default 57600; 115200 with --rig)")
-    f.add_argument("--target-system", type=positive_int, default=1, help="vehicle system id (default 1)")
-    f.add_argument("--target-component", type=positive_int, default=1, help="vehicle component id (default 1)")
+    f.add_argument("--target-system", type=int_range(1, 255), default=1, help="vehicle system id, 1..255 (default 1)")
+    f.add_argument("--target-component", type=int_range(1, 255), default=1,
+                   help="vehicle component id, 1..255 (default 1)")
     f.add_argument("--signing-key", metavar="FILE", help="MAVLink 2 signing key file (32 bytes, 64 hex digits or a passphrase)")
     f.add_argument("--output", choices=OUTPUTS, help="setpoint message (default: the config's [flight] output)")
     f.add_argument("--telemetry-rate", type=positive_float, metavar="HZ", help="ATTITUDE/LOCAL_POSITION_NED rate")
@@ -55,7 +59,7 @@ def add_fly_parser(sub, positive_int, positive_float) -> None:
     f.add_argument("--sitl", choices=("realtime", "lockstep"), default="realtime",
                    help="built-in SITL timing when no port/connection is given (default realtime)")
     f.add_argument("--lockstep", action="store_true", help="the vehicle at --connect is a SITL in lockstep")
-    f.add_argument("--seed", type=int, default=0, help="built-in SITL seed (default 0)")
+    f.add_argument("--seed", type=int_range(0, 2**32 - 1), default=0, help="built-in SITL seed (default 0)")
     f.add_argument("--sitl-arg", action="append", default=[], metavar="ARG",
                    help="extra option for the built-in SITL, repeatable (e.g. --sitl-arg=--wind=2)")
     f.add_argument("--duration", type=positive_float, metavar="SECONDS",
@@ -66,6 +70,32 @@ def add_fly_parser(sub, positive_int, positive_float) -> None:
                    help="MCAP flight log (default logs/<UTC time>_<controller>_<experiment>.mcap)")
     g.add_argument("--no-log", action="store_true", help="write no flight log")
     f.add_argument("--quiet", "-q", action="store_true", help="only warnings, failsafes and the final table")
+
+
+def int_range(lo: int, hi: int):
+    """An argparse type: a whole number in ``lo..hi``."""
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"must be in {lo}..{hi}, got {v}")
+        return v
+    return parse
+
+
+def check_output_paths(args: argparse.Namespace) -> None:
+    """``--summary``: its folder must exist and be writable (refused before anything flies, exit 2)."""
+    if not args.summary:
+        return
+    folder = Path(args.summary).resolve().parent
+    if not folder.is_dir():
+        raise ConfigError("--summary", "", f"folder {str(folder)!r} does not exist")
+    if not os.access(folder, os.W_OK):
+        raise ConfigError("--summary", "", f"folder {str(folder)!r} is not writable")
+    if Path(args.summary).is_dir():
+        raise ConfigError("--summary", "", f"{args.summary!r} is a folder, not a file")
 
 
 def _print(quiet: bool):
@@ -132,6 +162,7 @@ def _lockstep(args: argparse.Namespace) -> bool:
 
 
 def cmd_fly(args: argparse.Namespace, format_table) -> int:
+    check_output_paths(args)
     if args.rig is not None:
         return _cmd_fly_rig(args, format_table)
     if args.baud is None:
@@ -197,33 +228,62 @@ def _fly_mavlink(args, config, key, console, budget_ok, recorder, format_table) 
 
 def _fly(args, config, flight_class, link, child, lockstep: bool, recorder, console, format_table,
          **preflight_kwargs) -> int:
-    """Preflight and fly ``flight_class`` over ``link``; the link and the child simulator (if any) end with it."""
+    """Preflight and fly ``flight_class`` over ``link``; the link and the child simulator (if any) end with it.
+
+    Whatever happens after the flight object exists — a refusal, a link failure, an exception
+    anywhere — the vehicle is disarmed on the ground or landed, the parameters changed for the
+    flight are restored and then the summary is written.
+    """
     interrupts = Interrupts()
     clock = None if lockstep else MonotonicClock()
     if clock is not None:
         recorder.offset_ns = utc_offset_ns(clock.now_ns())
+    flight = None
+    result: FlightResult | None = None
+    failure: tuple[str, str] | None = None
     try:
         with interrupts:
             flight = flight_class(config, args.controller, link, clock, console=console, interrupts=interrupts,
                                   recorder=recorder)
+            if child is not None:
+                flight.vehicle_alive = child.exit_reason
             try:
                 flight.preflight(**preflight_kwargs)
             except PreflightRefused as exc:
                 flight.event("failsafe", f"preflight refused: {exc}")
-                flight.restore_params()
-                return _finish(args, None, "preflight_refused", config, str(exc), flight.events)
+                flight.disarm_on_ground()
+                failure = ("preflight_refused", str(exc))
             except LinkError as exc:
-                if child is not None:
-                    child.check_alive()
-                flight.event("failsafe", f"link error: {exc}")
-                return _finish(args, None, "link_error", config, str(exc), flight.events)
-            result = flight.fly()
+                why = (child.exit_reason() if child is not None else None) or str(exc)
+                flight.event("failsafe", f"link error: {why}")
+                flight.disarm_on_ground()
+                failure = ("link_error", why)
+            else:
+                result = flight.fly()
             flight.restore_params()
+    except Exception as exc:  # noqa: BLE001 - outside the mission loop's own net: land, restore, report
+        why = f"{type(exc).__name__}: {exc}"
+        print(f"gcs: internal error: {why}", file=sys.stderr)
+        failure, result = ("internal_error", why), None
+        if flight is not None:
+            _last_resort(flight, why)
     finally:
         link.close()
         if child is not None:
             child.stop()
+    if failure is not None:
+        return _finish(args, None, failure[0], config, failure[1], flight.events if flight is not None else None)
     return _report(args, result, config, format_table)
+
+
+def _last_resort(flight, why: str) -> None:
+    """An exception escaped the flight: land (or disarm on the ground) and restore, each step on its own."""
+    flight.event("failsafe", f"internal error ({why}): landing", traceback=traceback.format_exc())
+    for step in (flight.emergency_land, flight.restore_params):
+        try:
+            step()
+        except Exception as exc:  # noqa: BLE001 - each last-resort step is tried whatever the others did
+            flight.event("failsafe", f"{step.__name__} failed: {type(exc).__name__}: {exc}")
 
 
 def _cmd_fly_rig(args: argparse.Namespace, format_table) -> int:

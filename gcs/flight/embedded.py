@@ -9,9 +9,11 @@ so its physics never competes with the 100 Hz loop for the interpreter.
 from __future__ import annotations
 
 import os
+import selectors
 import signal
 import subprocess
 import sys
+import tempfile
 from typing import Sequence
 
 from gcs.link.mavlink import LinkError as GcsError  # a dead simulator is a link failure (exit 6)
@@ -36,33 +38,57 @@ class EmbeddedSitl:
         self.args = [sys.executable, "-m", "sitl.cli", "--udp", f"127.0.0.1:{gcs_port}", "--seed", str(seed),
                      "--parent-pid", str(os.getpid()), *(["--lockstep"] if lockstep else []), *extra_args]
         self.proc: subprocess.Popen | None = None
+        self.name = "the built-in SITL"
+        self._stderr = None
+        self._exit_text: str | None = None
 
-    def start(self) -> "EmbeddedSitl":
+    def _spawn(self, stdout) -> None:
+        """Start the child; its stderr goes to a temporary file (a pipe nobody reads could fill and
+        block it), read once when it exits."""
+        self._stderr = tempfile.TemporaryFile()
         try:
             # Its own process group: a Ctrl-C at the terminal reaches the ground station only,
             # which lands the vehicle before stopping the simulator.
-            self.proc = subprocess.Popen(self.args, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                         stderr=subprocess.PIPE, start_new_session=True)
+            self.proc = subprocess.Popen(self.args, stdin=subprocess.DEVNULL, stdout=stdout,
+                                         stderr=self._stderr, start_new_session=True)
         except OSError as exc:
-            raise GcsError(f"cannot start the built-in SITL: {exc}") from None
+            raise GcsError(f"cannot start {self.name}: {exc}") from None
+
+    def start(self) -> "EmbeddedSitl":
+        self._spawn(subprocess.DEVNULL)
         return self
+
+    def exit_reason(self) -> str | None:
+        """None while the child runs; once it has exited, why (its exit code and last error line)."""
+        if self._exit_text is not None:
+            return self._exit_text
+        if self.proc is None or self.proc.poll() is None:
+            return None
+        lines: list[str] = []
+        if self._stderr is not None:
+            self._stderr.seek(0)
+            lines = self._stderr.read()[-4096:].decode(errors="replace").strip().splitlines()
+        self._exit_text = (f"{self.name} exited with code {self.proc.returncode}"
+                           + (f": {lines[-1].strip()}" if lines else ""))
+        return self._exit_text
 
     def check_alive(self) -> None:
         """Raise if the child died (with its last error line)."""
-        if self.proc is not None and self.proc.poll() is not None:
-            err = (self.proc.stderr.read() or b"").decode(errors="replace").strip().splitlines() if self.proc.stderr else []
-            raise GcsError(f"the built-in SITL exited with code {self.proc.returncode}"
-                           + (f": {err[-1]}" if err else ""))
+        why = self.exit_reason()
+        if why is not None:
+            raise GcsError(why)
 
     def stop(self, timeout_s: float = 5.0) -> None:
-        if self.proc is None or self.proc.poll() is not None:
-            return
-        try:
-            os.killpg(self.proc.pid, signal.SIGINT)
-            self.proc.wait(timeout_s)
-        except (ProcessLookupError, subprocess.TimeoutExpired):
-            self.proc.kill()
-            self.proc.wait(timeout_s)
+        if self.proc is not None and self.proc.poll() is None:
+            try:
+                os.killpg(self.proc.pid, signal.SIGINT)
+                self.proc.wait(timeout_s)
+            except (ProcessLookupError, subprocess.TimeoutExpired):
+                self.proc.kill()
+                self.proc.wait(timeout_s)
+        if self._stderr is not None:
+            self._stderr.close()
+            self._stderr = None
 
     def __enter__(self) -> "EmbeddedSitl":
         return self.start()
@@ -92,17 +118,14 @@ class EmbeddedRig(EmbeddedSitl):
         self.args = [sys.executable, "-m", "sitl.cli", "--rig", "4dof", "--seed", str(seed), "--baud", str(baud),
                      "--parent-pid", str(os.getpid()), *(["--lockstep"] if lockstep else []), *extra_args]
         self.proc = None
+        self.name = "the rig emulator"
+        self._stderr = None
+        self._exit_text = None
         self.device: str | None = None
         self.start_timeout_s = start_timeout_s
 
     def start(self) -> "EmbeddedRig":
-        import selectors
-
-        try:
-            self.proc = subprocess.Popen(self.args, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                         stderr=subprocess.PIPE, start_new_session=True)
-        except OSError as exc:
-            raise GcsError(f"cannot start the rig emulator: {exc}") from None
+        self._spawn(subprocess.PIPE)
         sel = selectors.DefaultSelector()
         sel.register(self.proc.stdout, selectors.EVENT_READ)  # type: ignore[arg-type]
         ready = sel.select(self.start_timeout_s)

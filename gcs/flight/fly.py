@@ -13,6 +13,7 @@ and the landing.  Every frame both ways goes to the flight log (``recorder``).
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Callable
 
@@ -28,11 +29,19 @@ from gcs.flight.loop import (EXIT_CODES, FlightLoop, FlightResult, Interrupts, P
                              VehicleClock)
 from gcs.flight.output import OutputAdapter, OutputModel
 from gcs.flight.recorder import FlightRecorder
+from gcs.flight.streams import StreamMonitor
 from gcs.flight.telemetry import Telemetry
+from gcs.link.guard import GuardLimits, OutputGuard, UnsafeCommand
 from gcs.link.mavlink import LinkError, MavlinkLink
 from gcs.model import Command, State
 
 __all__ = ["Flight", "FlightResult", "VehicleClock", "EXIT_CODES", "PreflightRefused"]
+
+#: Largest body rate a setpoint may carry [rad/s] (the output guard's limit).
+MAX_BODY_RATE_RAD_S = 35.0
+#: The loop fails safe when a stream the controller flies on stays below this share of its requested rate.
+MIN_RATE_FRACTION = 0.25
+STREAM_IDS = {"ATTITUDE": mavlink.MAVLINK_MSG_ID_ATTITUDE, "LOCAL_POSITION_NED": mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED}
 
 class Flight(FlightLoop):
     """One flight of ``controller`` on ``config``'s mission over a MAVLink ``link``.
@@ -78,6 +87,12 @@ class Flight(FlightLoop):
                                                                               accepted)
         self.adapter: OutputAdapter | None = None
         self._last_rx_wall = time.monotonic()
+        self.guard = OutputGuard(GuardLimits(max_body_rate_rad_s=MAX_BODY_RATE_RAD_S))
+        link.guard = self.guard
+        rate = fc.telemetry_rate_hz
+        self.streams = StreamMonitor({"ATTITUDE": rate, "LOCAL_POSITION_NED": rate},
+                                     min_rate_hz=MIN_RATE_FRACTION * rate)
+        self._armed_sent = False
 
     # ------------------------------------------------------------------ events and I/O
     def _vehicle_event(self, kind: str, text: str) -> None:
@@ -96,6 +111,11 @@ class Flight(FlightLoop):
             self._pump()
             if predicate():
                 return True
+            gone = self._vehicle_gone()
+            if gone is not None:
+                raise LinkError(gone)
+            if self.adapter is not None:
+                self._health(self.clock.now_ns())  # streams clobbered while landing are asked for again too
             if self.interrupts.count and not self.telemetry.status.armed and what not in ("disarm",):
                 return False
             if send:
@@ -144,17 +164,72 @@ class Flight(FlightLoop):
         state = self.estimator.state()
         self._send(self.adapter.level(state, thrust_n, self.telemetry.status.time_boot_ms))  # type: ignore[union-attr]
 
+    def _safe_command(self):
+        """Level, yaw held, 90 % of hover thrust (0 before the adapter exists: on the ground)."""
+        state = self.estimator.state()
+        if self.adapter is None:
+            q = (1.0, 0.0, 0.0, 0.0)
+            return self.link.mav.set_attitude_target_encode(self.telemetry.status.time_boot_ms & 0xFFFFFFFF,
+                                                            self.link.target_system, self.link.target_component,
+                                                            7, q, 0.0, 0.0, 0.0, 0.0)
+        return self.adapter.level(state, 0.9 * self.model.hover_thrust_n, self.telemetry.status.time_boot_ms)
+
+    def _health(self, now_ns: int) -> tuple[str, str] | None:
+        """The stream-rate watch: ask again for a stream that fell, fail safe when it stays too slow."""
+        verdict = self.streams.update(now_ns, self.telemetry.counts)
+        for name in verdict.rerequest:
+            rate = self.streams.requested_hz[name]
+            got = self.streams.rates_hz.get(name, 0.0)
+            if self.streams.rerequests <= 3 or self.streams.rerequests % 20 == 0:
+                self.event("warning", f"{name} at {got:.1f} Hz instead of {rate:g} Hz (another ground station's "
+                                      f"stream request?): asking for {rate:g} Hz again")
+            try:
+                self.link.send_message_interval(STREAM_IDS[name], rate)
+            except LinkError as exc:
+                self._link_failed(exc)
+        if verdict.failure is not None:
+            return ("telemetry_slow", verdict.failure)
+        return None
+
+    def _abandon(self) -> None:
+        """LAND, sent a few times without waiting (the vehicle's guided timeout is the fallback)."""
+        for _ in range(3):
+            try:
+                self.link.send(self.link.mav.command_long_encode(
+                    self.link.target_system, self.link.target_component, mavlink.MAV_CMD_DO_SET_MODE, 0,
+                    mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 9, 0, 0, 0, 0, 0))
+            except (LinkError, UnsafeCommand):
+                return
+
     # ------------------------------------------------------------------ preflight
     def _param(self, name: str, default: float | None) -> float:
         """A parameter of the vehicle; ``default=None`` makes it required (refuse without it)."""
         self._check_interrupt()
         try:
-            return self.link.param_get(name, timeout_s=1.0, retries=1, on_message=self._handle)
+            value = self.link.param_get(name, timeout_s=1.0, retries=1, on_message=self._handle)
         except LinkError:
             if default is None:
                 raise PreflightRefused(f"parameter {name} not readable; it is needed to fly") from None
             self.event("warning", f"parameter {name} not readable; assuming {default:g}")
             return default
+        if not math.isfinite(value):
+            raise PreflightRefused(f"parameter {name} = {value} is not a finite number")
+        return value
+
+    def disarm_on_ground(self) -> None:
+        """After a preflight refusal that came after the arm command: disarm (the vehicle is on the ground)."""
+        if not self._armed_sent:
+            return
+        self._pump()
+        if not self.telemetry.status.armed:
+            return
+        try:
+            self.link.arm(False, on_message=self._handle)
+            self._wait_for("disarm", lambda: not self.telemetry.status.armed, 3.0, send=False)
+        except LinkError as exc:
+            self.event("warning", f"disarm after the refusal not acknowledged: {exc}")
+        self.event("arming", "disarmed after the preflight refusal" if not self.telemetry.status.armed
+                   else "still armed after the preflight refusal: disarm it")
 
     def _set_param(self, name: str, value: float, old: float) -> float:
         new = self.link.param_set(name, value, on_message=self._handle)
@@ -230,7 +305,11 @@ class Flight(FlightLoop):
                                        "is done by the controller)")
             self.event("param", "ATC_ANGLE_BOOST 1 -> 0 (the controller compensates tilt)")
         hover = self._param("MOT_THST_HOVER", None)
+        if not 0.05 <= hover <= 0.95:
+            raise PreflightRefused(f"MOT_THST_HOVER = {hover:g} is not a plausible hover throttle (0.05..0.95)")
         gains = tuple(self._param(f"ATC_ANG_{ax}_P", 4.5) for ax in ("RLL", "PIT", "YAW"))
+        if not all(0.1 <= g <= 50.0 for g in gains):
+            raise PreflightRefused(f"ATC_ANG_RLL/PIT/YAW_P = {gains} are not plausible angle gains (0.1..50)")
         self.adapter = OutputAdapter(OutputModel(
             kind=self.output_kind, mass_kg=self.model.mass_kg, gravity_m_s2=self.model.gravity_m_s2,
             hover_throttle=hover, inertia_kg_m2=fc.inertia_kg_m2, max_torque_nm=fc.max_torque_nm,
@@ -252,12 +331,16 @@ class Flight(FlightLoop):
         res = link.set_mode("GUIDED_NOGPS", on_message=self._handle)
         if res != mavlink.MAV_RESULT_ACCEPTED:
             raise PreflightRefused(f"mode GUIDED_NOGPS refused (MAV_RESULT {res})")
-        self._wait_for("mode", lambda: self.telemetry.status.custom_mode == 20, 3.0)
+        if not self._wait_for("mode", lambda: self.telemetry.status.custom_mode == 20, 3.0):
+            # A mode is trusted only once the vehicle reports it: never arm in another one.
+            raise PreflightRefused(f"mode GUIDED_NOGPS acknowledged but not confirmed: the vehicle reports "
+                                   f"{self.telemetry.status.mode}")
         # Stream setpoints before arming (0.5 s of idle, level).
         for _ in range(int(round(0.5 / self.config.experiment.ts_s))):
             self._pump()
             self._idle_tick(0.0)
         self._check_interrupt()
+        self._armed_sent = True
         res = link.arm(True, on_message=self._handle)
         if res != mavlink.MAV_RESULT_ACCEPTED:
             # The reason comes as STATUSTEXT, before or just after the acknowledgement.
@@ -292,6 +375,10 @@ class Flight(FlightLoop):
             self._link_failed(exc)
 
     def _finish(self, reason: str) -> None:
+        gone = self._vehicle_gone()
+        if gone is not None:
+            self.event("warning", f"{gone}: nothing left to land")
+            return
         if reason == "vehicle_took_over":
             self._wait_for("disarm", lambda: not self.telemetry.status.armed, self.flight_cfg.land_timeout_s,
                            send=False)
@@ -302,7 +389,12 @@ class Flight(FlightLoop):
         c = self.link.counters
         samples = self.telemetry.timesync_samples_ms
         return {"received": c.received, "sent": c.sent, "bad_data": c.bad_data, "other_system": c.other_system,
-                "unsigned_rejected": c.unsigned_rejected, "timesync_rtt_ms": self.telemetry.timesync_rtt_ms,
+                "unsigned_rejected": c.unsigned_rejected, "bad_signature": c.bad_signature,
+                "other_address": c.other_address, "truncated": c.truncated, "malformed": c.malformed,
+                "blocked": c.blocked, "guard_blocked": dict(self.guard.blocked),
+                "telemetry_rejected": dict(self.telemetry.validator.rejected),
+                "stream_rates_hz": dict(self.streams.rates_hz), "stream_rerequests": self.streams.rerequests,
+                "timesync_rtt_ms": self.telemetry.timesync_rtt_ms,
                 "timesync_rtt_median_ms": float(np.median(samples)) if samples else None}
 
     def fly(self) -> FlightResult:

@@ -42,7 +42,15 @@ code  exit_reason        what happened
 8     immediate_land     a second Ctrl-C: land at once
 9     vehicle_took_over  the vehicle left our control (disarmed, another mode, the rig's
                          cut-off): setpoints stop, the vehicle is left to itself
+10    unsafe_command     a non-finite or out-of-limit estimate or command was caught
+                         (never sent): a safe level command, then landing
+11    internal_error     an exception in the ground station while flying: landing
+12    telemetry_slow     the streams the controller flies on stayed too slow (after
+                         asking for them again): landing
 ====  =================  ==========================================================
+
+Whatever ends the flight, the vehicle is landed and disarmed (or left to the pilot, 9),
+the parameters changed for the flight are restored and the log is finished.
 """
 
 from __future__ import annotations
@@ -51,6 +59,7 @@ import math
 import signal
 import threading
 import time
+import traceback
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -66,6 +75,7 @@ from gcs.flight.recorder import FlightRecorder
 from gcs.log.flightlog import StageCost
 from gcs.flight.safety import EnvelopeLimits, SafetyEnvelope
 from gcs.flight.stats import LoopStats
+from gcs.link.guard import UnsafeCommand
 from gcs.link.mavlink import LinkError
 from gcs.metrics import FlightRecord, controller_cost, flight_metrics
 from gcs.mission import Mission
@@ -74,7 +84,8 @@ from gcs.model import Command, State
 __all__ = ["FlightLoop", "FlightResult", "VehicleClock", "Interrupts", "EXIT_CODES", "PreflightRefused"]
 
 EXIT_CODES = {"completed": 0, "telemetry_lost": 3, "geofence": 4, "interrupted": 5, "link_error": 6,
-              "preflight_refused": 7, "immediate_land": 8, "vehicle_took_over": 9}
+              "preflight_refused": 7, "immediate_land": 8, "vehicle_took_over": 9, "unsafe_command": 10,
+              "internal_error": 11, "telemetry_slow": 12}
 
 #: After the descent of a vehicle that does not land itself: how long to wait for touchdown [s].
 TOUCHDOWN_WAIT_S = 5.0
@@ -291,11 +302,39 @@ class FlightLoop:
             self._link_down = True
             self.event("warning", f"link failure: {exc}")
 
+    #: Set when the output guard blocked a command: ``(exit_reason, text)``; the loop fails safe.
+    fault: tuple[str, str] | None = None
+    #: () -> why the vehicle process is gone (a child simulator that exited), or None.
+    vehicle_alive: Callable[[], str | None] | None = None
+
     def _send(self, msg) -> None:
         try:
             self.link.send(msg)  # type: ignore[attr-defined]
+        except UnsafeCommand as exc:
+            self._unsafe(str(exc))
         except LinkError as exc:
             self._link_failed(exc)
+
+    def _unsafe(self, why: str) -> None:
+        """A command was blocked before the wire: send the safe one instead, and fail safe (once)."""
+        first = self.fault is None
+        if first:
+            self.fault = ("unsafe_command", why)
+            self.event("failsafe", f"output guard blocked a command ({why}): safe level command, landing")
+        try:
+            self.link.send(self._safe_command())  # type: ignore[attr-defined]
+        except (UnsafeCommand, LinkError) as exc:
+            if first:
+                self.event("warning", f"the safe command could not be sent either: {exc}")
+
+    def _safe_command(self):
+        """A level command below hover thrust for this vehicle (what a blocked command is replaced by)."""
+        raise NotImplementedError
+
+    def _vehicle_gone(self) -> str | None:
+        if self.vehicle_alive is None:
+            return None
+        return self.vehicle_alive()
 
     # ------------------------------------------------------------------ hooks
 
@@ -317,6 +356,13 @@ class FlightLoop:
     def _landed(self) -> bool:
         return False
 
+    def _abandon(self) -> None:
+        """The last resort when landing raised: whatever gets the vehicle's own failsafe to land it."""
+
+    def _health(self, now_ns: int) -> tuple[str, str] | None:
+        """Once a tick: a failsafe ``(exit_reason, text)`` the vehicle's link calls for (slow streams), or None."""
+        return None
+
     def _mission_origin(self, state: State) -> tuple[float, float, float]:
         """Where the mission's (0, 0, 0) is: the takeoff point (a real autopilot's local origin need not
         be where the vehicle stands)."""
@@ -327,6 +373,10 @@ class FlightLoop:
 
     def restore_params(self) -> None:
         """Put back what was changed on the vehicle for the flight (nothing by default)."""
+
+    def emergency_land(self) -> None:
+        """Land from wherever the flight stands (an exception escaped the flight): the usual landing."""
+        self._finish("internal_error")
 
     # ------------------------------------------------------------------ the mission
     def _landing_mission(self, from_z: float, to_z: float) -> tuple[Mission, float]:
@@ -373,104 +423,134 @@ class FlightLoop:
         self.event("phase", f"mission start: {len(self.config.mission)} phases, {mission.duration_s:g} s")
         wall0 = time.perf_counter()
         log_prev_ns = 0
-        while True:
-            deadline = t0 + k * ts_ns
-            self.clock.sleep_until_ns(deadline)
-            wake = self.clock.now_ns()
-            late = wake - deadline
-            if late >= ts_ns and not self.lockstep:
-                self.stats.skipped_ticks += int(late // ts_ns)
-            c0 = time.perf_counter_ns()
-            self._pump()
-            c1 = time.perf_counter_ns()
-            self.estimator.predict(e.ts_s, self._last_cmd)
-            state = self.estimator.state()
-            c2 = time.perf_counter_ns()
-            t = k * e.ts_s
-            # --- failsafes and interrupts
-            if not self._fresh(wake, stale_s):
-                reason = "telemetry_lost"
-                self.event("failsafe", f"telemetry stale for more than {stale_s:g} s at t = {t:.2f} s: landing")
-                break
-            breach = self.envelope.breaches(state)
-            if breach:
-                reason = "geofence"
-                self.event("failsafe", f"{', '.join(sorted(breach))} breached at t = {t:.2f} s "
-                                       f"(x {state.x:.2f}, y {state.y:.2f}, z {state.z:.2f} m): landing")
-                break
-            lost = self._control_lost(t)
-            if lost is not None:
-                reason = "vehicle_took_over"
-                self.event("failsafe", f"the vehicle left {self.control_name} at t = {t:.2f} s ({lost}): stopping setpoints")
-                break
-            if self.interrupts.count > handled_interrupts:
-                handled_interrupts = self.interrupts.count
-                if handled_interrupts >= 2:
-                    reason = "immediate_land"
-                    self.event("failsafe", "second interrupt: landing now")
+        try:
+            while True:
+                deadline = t0 + k * ts_ns
+                self.clock.sleep_until_ns(deadline)
+                wake = self.clock.now_ns()
+                late = wake - deadline
+                if late >= ts_ns and not self.lockstep:
+                    self.stats.skipped_ticks += int(late // ts_ns)
+                c0 = time.perf_counter_ns()
+                self._pump()
+                c1 = time.perf_counter_ns()
+                self.estimator.predict(e.ts_s, self._last_cmd)
+                state = self.estimator.state()
+                c2 = time.perf_counter_ns()
+                t = k * e.ts_s
+                # --- failsafes and interrupts
+                gone = self._vehicle_gone() if k % 10 == 0 else None
+                if gone is not None:
+                    reason = "link_error"
+                    self.event("failsafe", f"{gone} at t = {t:.2f} s")
                     break
-                reason = "interrupted"
-                override, override_dz = self._landing_mission(state.z, origin[2])
-                override_k0 = k
-                self.event("interrupt", f"interrupted at t = {t:.2f} s: controlled descent from z = {state.z:.2f} m "
+                if self.fault is not None:
+                    reason = self.fault[0]
+                    break
+                if not self._fresh(wake, stale_s):
+                    reason = "telemetry_lost"
+                    self.event("failsafe", f"telemetry stale for more than {stale_s:g} s at t = {t:.2f} s: landing")
+                    break
+                health = self._health(wake)
+                if health is not None:
+                    reason = health[0]
+                    self.event("failsafe", f"{health[1]} at t = {t:.2f} s: landing")
+                    break
+                if not all(math.isfinite(v) for v in state):
+                    reason = "unsafe_command"
+                    self.event("failsafe", f"the state estimate is not finite at t = {t:.2f} s: landing")
+                    break
+                breach = self.envelope.breaches(state)
+                if breach:
+                    reason = "geofence"
+                    self.event("failsafe", f"{', '.join(sorted(breach))} breached at t = {t:.2f} s "
+                                           f"(x {state.x:.2f}, y {state.y:.2f}, z {state.z:.2f} m): landing")
+                    break
+                lost = self._control_lost(t)
+                if lost is not None:
+                    reason = "vehicle_took_over"
+                    self.event("failsafe", f"the vehicle left {self.control_name} at t = {t:.2f} s ({lost}): stopping setpoints")
+                    break
+                if self.interrupts.count > handled_interrupts:
+                    handled_interrupts = self.interrupts.count
+                    if handled_interrupts >= 2:
+                        reason = "immediate_land"
+                        self.event("failsafe", "second interrupt: landing now")
+                        break
+                    reason = "interrupted"
+                    override, override_dz = self._landing_mission(state.z, origin[2])
+                    override_k0 = k
+                    self.event("interrupt", f"interrupted at t = {t:.2f} s: controlled descent from z = {state.z:.2f} m "
+                                            f"at {self.flight_cfg.landing_speed_m_s:g} m/s")
+                if override is None and t >= mission.duration_s:
+                    if self.lands_itself:
+                        break
+                    descent = True
+                    override, override_dz = self._landing_mission(state.z, origin[2])
+                    override_k0 = k
+                    self.event("phase", f"mission over at t = {t:.2f} s: descent from z = {state.z:.2f} m "
                                         f"at {self.flight_cfg.landing_speed_m_s:g} m/s")
-            if override is None and t >= mission.duration_s:
-                if self.lands_itself:
+                if override is not None:
+                    tm = (k - override_k0) * e.ts_s
+                    if tm >= override.duration_s and (
+                            self.lands_itself or self._landed() or tm >= override.duration_s + TOUCHDOWN_WAIT_S):
+                        break
+                    r = override.reference(min(tm, override.duration_s))  # x, y from the estimate: absolute
+                    ref = r._replace(z=r.z + override_dz)
+                else:
+                    seg = mission.segment_at(t)
+                    if seg is not None and seg.index != phase_idx:
+                        phase_idx = seg.index
+                        self.event("phase", f"{seg.phase.kind} ({seg.phase.duration_s:g} s) at t = {t:.2f} s",
+                                   phase=seg.phase.kind, index=seg.index)
+                    r = mission.reference(t)
+                    ref = r._replace(x=r.x + origin[0], y=r.y + origin[1], z=r.z + origin[2])
+                # --- control, envelope, output
+                raw = self.controller.step(k, state, ref)
+                cmd, flags = self.envelope.apply(state, raw)
+                if "non-finite" in flags:
+                    reason = "unsafe_command"
+                    self.event("failsafe", f"{self.controller_name} commanded a non-finite value at t = {t:.2f} s "
+                                           f"({tuple(raw)}): not sent, landing")
                     break
-                descent = True
-                override, override_dz = self._landing_mission(state.z, origin[2])
-                override_k0 = k
-                self.event("phase", f"mission over at t = {t:.2f} s: descent from z = {state.z:.2f} m "
-                                    f"at {self.flight_cfg.landing_speed_m_s:g} m/s")
-            if override is not None:
-                tm = (k - override_k0) * e.ts_s
-                if tm >= override.duration_s and (
-                        self.lands_itself or self._landed() or tm >= override.duration_s + TOUCHDOWN_WAIT_S):
+                for f in flags - self._limit_flags_seen:
+                    self.event("warning", f"{f} limit acting at t = {t:.2f} s")
+                self._limit_flags_seen |= flags
+                c3 = time.perf_counter_ns()
+                self._send_command(state, cmd)
+                if isinstance(self.clock, VehicleClock):
+                    self.clock.mark_sent()
+                if self.fault is not None:
+                    reason = self.fault[0]
                     break
-                r = override.reference(min(tm, override.duration_s))  # x, y from the estimate: absolute
-                ref = r._replace(z=r.z + override_dz)
-            else:
-                seg = mission.segment_at(t)
-                if seg is not None and seg.index != phase_idx:
-                    phase_idx = seg.index
-                    self.event("phase", f"{seg.phase.kind} ({seg.phase.duration_s:g} s) at t = {t:.2f} s",
-                               phase=seg.phase.kind, index=seg.index)
-                r = mission.reference(t)
-                ref = r._replace(x=r.x + origin[0], y=r.y + origin[1], z=r.z + origin[2])
-            # --- control, envelope, output
-            raw = self.controller.step(k, state, ref)
-            cmd, flags = self.envelope.apply(state, raw)
-            for f in flags - self._limit_flags_seen:
-                self.event("warning", f"{f} limit acting at t = {t:.2f} s")
-            self._limit_flags_seen |= flags
-            c3 = time.perf_counter_ns()
-            self._send_command(state, cmd)
-            if isinstance(self.clock, VehicleClock):
-                self.clock.mark_sent()
-            c4 = time.perf_counter_ns()
-            j = (horizon.last_steps_to_go or 0) if horizon is not None else 0
-            if rec.sink is not None:
-                rec.tick(wake, k, state, ref, raw, cmd, j, horizon_mode(k, h_steps, h_after),
-                         (late / 1e9, (c4 - c0) / 1e9, late >= ts_ns, (c1 - c0) / 1e9, (c2 - c1) / 1e9,
-                          (c3 - c2) / 1e9, (c4 - c3) / 1e9, log_prev_ns / 1e9))
-            c5 = time.perf_counter_ns()
-            log_prev_ns = c5 - c4
-            self.stats.record(late, {"decode": c1 - c0, "estimate": c2 - c1, "control": c3 - c2, "send": c4 - c3,
-                                     "log": log_prev_ns})
-            self._last_cmd = cmd
-            states.append(state)
-            refs.append(ref)
-            cmds.append(cmd)
-            js.append(j)
-            if k % 100 == 0:  # once a second: the ground station is alive, and how late is the link
-                self._housekeeping(k)
-            if t >= next_live:
-                next_live = t + self.live_period_s
-                self.console(f"t {t:7.2f} s  z {state.z:6.3f} m  ref {ref.z:6.3f} m  err {ref.z - state.z:+.3f} m  "
-                             f"xy ({state.x:+.2f}, {state.y:+.2f}) m  thrust {cmd.thrust_n:5.2f} N")
-            k += 1
-            if not self.lockstep and late >= ts_ns:
-                k += int(late // ts_ns)
+                c4 = time.perf_counter_ns()
+                j = (horizon.last_steps_to_go or 0) if horizon is not None else 0
+                if rec.sink is not None:
+                    rec.tick(wake, k, state, ref, raw, cmd, j, horizon_mode(k, h_steps, h_after),
+                             (late / 1e9, (c4 - c0) / 1e9, late >= ts_ns, (c1 - c0) / 1e9, (c2 - c1) / 1e9,
+                              (c3 - c2) / 1e9, (c4 - c3) / 1e9, log_prev_ns / 1e9))
+                c5 = time.perf_counter_ns()
+                log_prev_ns = c5 - c4
+                self.stats.record(late, {"decode": c1 - c0, "estimate": c2 - c1, "control": c3 - c2, "send": c4 - c3,
+                                         "log": log_prev_ns})
+                self._last_cmd = cmd
+                states.append(state)
+                refs.append(ref)
+                cmds.append(cmd)
+                js.append(j)
+                if k % 100 == 0:  # once a second: the ground station is alive, and how late is the link
+                    self._housekeeping(k)
+                if t >= next_live:
+                    next_live = t + self.live_period_s
+                    self.console(f"t {t:7.2f} s  z {state.z:6.3f} m  ref {ref.z:6.3f} m  err {ref.z - state.z:+.3f} m  "
+                                 f"xy ({state.x:+.2f}, {state.y:+.2f}) m  thrust {cmd.thrust_n:5.2f} N")
+                k += 1
+                if not self.lockstep and late >= ts_ns:
+                    k += int(late // ts_ns)
+        except Exception as exc:  # noqa: BLE001 - any failure while flying must end in a landing, never an abandoned vehicle
+            reason = "internal_error"
+            self.event("failsafe", f"internal error at t = {k * e.ts_s:.2f} s ({type(exc).__name__}: {exc}): landing",
+                       traceback=traceback.format_exc())
         wall_s = time.perf_counter() - wall0
         end_state = self.estimator.state()
         t_end = self.clock.now_ns()
@@ -479,7 +559,12 @@ class FlightLoop:
         if descent and reason == "completed":
             self.event("phase", "on the ground" if self._landed() else
                        f"not on the ground {TOUCHDOWN_WAIT_S:g} s after the descent")
-        self._finish(reason)
+        try:
+            self._finish(reason)
+        except Exception as exc:  # noqa: BLE001 - the landing itself failed: the vehicle's own failsafes are left
+            self.event("failsafe", f"landing failed ({type(exc).__name__}: {exc}); the vehicle's own failsafe "
+                                   "must bring it down", traceback=traceback.format_exc())
+            self._abandon()
         record = None
         metrics: dict = {}
         if cmds:
@@ -488,7 +573,11 @@ class FlightLoop:
             n = min(len(cmds), mission_steps)  # a descent flown after the mission is logged, not measured
             record = FlightRecord(e.ts_s, np.array(states[:n + 1], float), np.array(refs[:n + 1], float),
                                   np.array(cmds[:n], float), np.array(js[:n], dtype=np.int64))
-            metrics = flight_metrics(record, self.config, mission, cost)
+            try:
+                metrics = flight_metrics(record, self.config, mission, cost)
+            except (ValueError, FloatingPointError) as exc:
+                self.event("warning", f"metrics not computed: {exc}")
+                metrics = {}
             rec.flight_metrics(self.now_ns(), metrics)
         self.event("flight_end", f"{self.controller_name}: {reason} after {len(cmds) * e.ts_s:.2f} s",
                    exit_reason=reason)

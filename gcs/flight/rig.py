@@ -35,6 +35,8 @@ from gcs.estimate import StateEstimator
 from gcs.flight.clock import Clock
 from gcs.flight.loop import FlightLoop, FlightResult, Interrupts, PreflightRefused, VehicleClock
 from gcs.flight.recorder import FlightRecorder
+from gcs.flight.validate import TelemetryValidator
+from gcs.link.guard import GuardLimits, OutputGuard
 from gcs.link.mavlink import LinkError
 from gcs.link.rig import RigLink
 from gcs.model import Command, State
@@ -45,6 +47,8 @@ __all__ = ["RigFlight", "RIG_X_STD_M"]
 
 #: Noise assumed for the rig's x reading [m] (its rail encoder); also given to the locked y.
 RIG_X_STD_M = 0.005
+#: |x| along the rail beyond which a TELEMETRY reading is implausible [m].
+RIG_MAX_X_M = 50.0
 _US_WRAP = 1 << 32
 
 
@@ -87,6 +91,12 @@ class RigFlight(FlightLoop):
         self._hb_sent: dict[int, int] = {}
         if clock is None:
             self.clock = VehicleClock(lambda: self._time_ns, self._pump_wait)
+        self.validator = TelemetryValidator(on_first=lambda why: self.event(
+            "warning", f"telemetry rejected: {why} (further ones are counted)"))
+        self.guard = OutputGuard(GuardLimits(max_thrust_n=config.vehicle.max_thrust_n,
+                                             max_angular_accel_rad_s2=config.vehicle.max_angular_accel_rad_s2))
+        link.guard = self.guard
+        self._armed_sent = False
         if self.recorder.enabled:
             rec = self.recorder
             link.on_bytes = lambda direction, data: rec.frame(self.now_ns(), "rig", direction, data)
@@ -103,8 +113,23 @@ class RigFlight(FlightLoop):
             self._time_ns = time_us * 1000
         self._time_us_last = time_us
 
+    def _valid(self, msg: rp.Telemetry) -> bool:
+        """Finite, physically plausible, and not older than the last TELEMETRY (see :mod:`gcs.flight.validate`)."""
+        v = self.validator
+        if not v.attitude(msg.roll_rad, msg.pitch_rad, msg.yaw_rad, msg.roll_rate_rad_s, msg.pitch_rate_rad_s,
+                          msg.yaw_rate_rad_s, None, message="TELEMETRY"):
+            return False
+        if not math.isfinite(msg.x_m) or abs(msg.x_m) > RIG_MAX_X_M:
+            return v.reject("TELEMETRY", "x out of range")
+        step = (msg.time_us - self._time_us_last) % _US_WRAP if self._time_us_last is not None else 0
+        if self._time_us_last is not None and (step == 0 or step >= _US_WRAP // 2):
+            return v.reject("TELEMETRY", "time stamp did not advance")
+        return True
+
     def _handle(self, msg: rp.Message) -> None:
         if isinstance(msg, rp.Telemetry):
+            if not self._valid(msg):
+                return
             self._rig_time(msg.time_us)
             self._last_rx_ns = self.now_ns()  # arrival on the loop's clock (in lockstep: >= the rig's time)
             self.estimator.correct_position((msg.x_m, 0.0, msg.altitude_m))
@@ -120,7 +145,10 @@ class RigFlight(FlightLoop):
                 self.rtt_ms = (time.monotonic_ns() - sent) / 1e6
             self._flags(RigFlags(msg.flags))
         elif isinstance(msg, rp.Ack):
-            self.event("ack", f"{rp.MESSAGE_TYPES[msg.acked_type].NAME} seq {msg.seq}: {AckResult(msg.result).name}")
+            kind = rp.MESSAGE_TYPES.get(msg.acked_type)
+            name = kind.NAME if kind is not None else f"unknown type 0x{msg.acked_type:02x}"
+            result = AckResult(msg.result).name if msg.result in AckResult._value2member_map_ else str(msg.result)
+            self.event("ack", f"{name} seq {msg.seq}: {result}")
 
     def _flags(self, flags: RigFlags) -> None:
         changed = flags ^ self.flags
@@ -157,6 +185,20 @@ class RigFlight(FlightLoop):
     def _control_frame(self, thrust_n: float, roll: float, pitch: float, yaw: float) -> None:
         self._seq = self._seq % 65535 + 1
         self._send(rp.Control(self._seq, thrust_n, roll, pitch, yaw))
+
+    def _safe_command(self) -> rp.Control:
+        """Level at 90 % of hover thrust (all zero angular acceleration if the estimate is unusable)."""
+        self._seq = self._seq % 65535 + 1
+        thrust = 0.9 * self.model.hover_thrust_n if self.flags & RigFlags.ARMED else 0.0
+        cmd = self.envelope.level(self.estimator.state(), thrust)
+        if not all(math.isfinite(v) for v in cmd):
+            return rp.Control(self._seq, thrust, 0.0, 0.0, 0.0)
+        return rp.Control(self._seq, cmd.thrust_n, cmd.roll_accel_rad_s2, cmd.pitch_accel_rad_s2, 0.0)
+
+    def disarm_on_ground(self) -> None:
+        """After a preflight refusal that came after ARM: DISARM (the rig is on the ground)."""
+        if self._armed_sent and self.flags & RigFlags.ARMED:
+            self._disarm_landed("arming", "disarmed after the preflight refusal")
 
     def _level(self, thrust_n: float) -> None:
         """A level control frame at ``thrust_n`` (attitude PD of the safety envelope)."""
@@ -234,6 +276,7 @@ class RigFlight(FlightLoop):
         if not self.flags & RigFlags.LANDED:
             raise PreflightRefused(f"the rig is not resting on the ground (altitude {self.estimator.state().z:.2f} m)")
         self._check_interrupt()
+        self._armed_sent = True
         res = self._command(rp.Arm, "ARM")
         if res != AckResult.ACCEPTED:
             raise PreflightRefused(f"arming refused: {res.name}")
@@ -299,6 +342,10 @@ class RigFlight(FlightLoop):
     def _finish(self, reason: str) -> None:
         fc = self.flight_cfg
         descend = 0.9 * self.model.hover_thrust_n
+        gone = self._vehicle_gone()
+        if gone is not None:
+            self.event("warning", f"{gone}: nothing left to land")
+            return
         if reason == "vehicle_took_over":
             self._wait(lambda: not self.flags & RigFlags.ARMED, fc.land_timeout_s, level_thrust_n=None)
             if self.flags & RigFlags.CUTOFF:
@@ -347,7 +394,8 @@ class RigFlight(FlightLoop):
         st = self.status
         out = {"received": c.frames, "sent": self.link.sent, "bad_data": c.errors,
                "received_bytes": self.link.received_bytes, "sent_bytes": self.link.sent_bytes,
-               "decoder": c.as_dict(), "rtt_ms": self.rtt_ms}
+               "decoder": c.as_dict(), "rtt_ms": self.rtt_ms, "blocked": dict(self.guard.blocked),
+               "telemetry_rejected": dict(self.validator.rejected)}
         if st is not None:
             out["rig_rx"] = {"frames": st.rx_frames, "checksum_errors": st.rx_checksum_errors,
                              "length_errors": st.rx_length_errors, "truncated_frames": st.rx_truncated_frames,

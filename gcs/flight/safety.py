@@ -7,6 +7,8 @@ accelerations [rad/s^2]) with the state estimate (paper frame):
   ``+-max_angular_accel_rad_s2``;
 * tilt: when |roll| or |pitch| exceeds ``max_tilt_rad`` and the demand would
   tilt further, the demand on that axis is replaced by a levelling PD demand;
+* a command with a NaN or an infinity is flagged ``non-finite`` (the loop fails safe and
+  sends none of it): NaN would pass every comparison of the limits;
 * geofence: x or y farther than ``fence_half_width_m`` from the takeoff point, or
   z more than ``ceiling_m`` above it, is reported as a breach (the failsafe lands; the
   envelope itself does not steer).
@@ -17,13 +19,14 @@ limits that acted this tick, for the console and the log.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from gcs.model import Command, State
 
 __all__ = ["EnvelopeLimits", "SafetyEnvelope", "LIMIT_FLAGS"]
 
-LIMIT_FLAGS = ("thrust", "torque", "tilt", "geofence", "ceiling")
+LIMIT_FLAGS = ("thrust", "torque", "tilt", "geofence", "ceiling", "non-finite")
 
 
 @dataclass(frozen=True)
@@ -65,6 +68,10 @@ class SafetyEnvelope:
     def apply(self, state: State, cmd: Command) -> tuple[Command, frozenset[str]]:
         """The limited command and the flags of the limits that acted."""
         lim = self.limits
+        if not all(math.isfinite(v) for v in cmd):
+            # NaN passes every comparison below: such a command is never limited into something
+            # that looks valid; the loop fails safe on this flag and sends nothing of it.
+            return Command(0.0, 0.0, 0.0, 0.0), frozenset({"non-finite"})
         flags = set()
         thrust = cmd.thrust_n
         if thrust < 0.0 or thrust > lim.max_thrust_n:

@@ -9,12 +9,14 @@ own time (``time_boot_ms``) is tracked for lockstep.
 from __future__ import annotations
 
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Callable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.estimate import StateEstimator
+from gcs.flight.validate import TelemetryValidator
 from gcs.frames import body_rates_to_euler_rates, ned_to_paper_position, ned_to_paper_velocity
 
 __all__ = ["VehicleStatus", "Telemetry"]
@@ -32,7 +34,7 @@ class VehicleStatus:
     battery_voltage_v: float | None = None
     battery_remaining_pct: int | None = None
     time_boot_ms: int = 0
-    statustext: list[str] = field(default_factory=list)
+    statustext: deque = field(default_factory=lambda: deque(maxlen=64))
 
     @property
     def mode(self) -> str:
@@ -52,7 +54,8 @@ class Telemetry:
     """
 
     def __init__(self, estimator: StateEstimator, position_var_m2=(0.0025,) * 3, velocity_var_m2_s2=(0.0025,) * 3,
-                 on_event: Callable[[str, str], None] | None = None, target_component: int = 1) -> None:
+                 on_event: Callable[[str, str], None] | None = None, target_component: int = 1,
+                 validator: TelemetryValidator | None = None) -> None:
         self.target_component = target_component
         self.estimator = estimator
         self.position_var = tuple(position_var_m2)
@@ -63,27 +66,40 @@ class Telemetry:
         self.timesync_rtt_ms: float | None = None
         self.timesync_samples_ms: list[float] = []
         self.timesync_sent: set[int] = set()
+        #: Valid messages received, per type (the loop's stream-rate monitor reads it).
+        self.counts: dict[str, int] = {}
+        self.validator = validator or TelemetryValidator(on_first=lambda why: self._event(
+            "warning", f"telemetry rejected: {why} (further ones are counted)"))
 
     def _event(self, kind: str, text: str) -> None:
         if self.on_event is not None:
             self.on_event(kind, text)
 
     def handle(self, msg, now_ns: int) -> None:
-        """Take one message received at loop time ``now_ns``."""
+        """Take one message received at loop time ``now_ns`` (validated first: see :mod:`gcs.flight.validate`)."""
         if msg.get_srcComponent() != self.target_component:
             return  # a companion computer or gimbal of the same system: not the autopilot
         t = msg.get_type()
-        self.last_ns[t] = now_ns
         st = self.status
+        v = self.validator
         if t == "ATTITUDE":
+            if not v.attitude(msg.roll, msg.pitch, msg.yaw, msg.rollspeed, msg.pitchspeed, msg.yawspeed,
+                              int(msg.time_boot_ms)):
+                return
             er = body_rates_to_euler_rates(msg.roll, msg.pitch, msg.rollspeed, msg.pitchspeed, msg.yawspeed)
             self.estimator.set_attitude(msg.roll, msg.pitch, msg.yaw, *er)
             st.time_boot_ms = max(st.time_boot_ms, int(msg.time_boot_ms))
         elif t == "LOCAL_POSITION_NED":
+            if not v.position(msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz, int(msg.time_boot_ms)):
+                return
             self.estimator.correct_position(ned_to_paper_position(msg.x, msg.y, msg.z), self.position_var)
             self.estimator.correct_velocity(ned_to_paper_velocity(msg.vx, msg.vy, msg.vz), self.velocity_var)
             st.time_boot_ms = max(st.time_boot_ms, int(msg.time_boot_ms))
-        elif t == "HEARTBEAT":
+        self.last_ns[t] = now_ns
+        self.counts[t] = self.counts.get(t, 0) + 1
+        if t in ("ATTITUDE", "LOCAL_POSITION_NED"):
+            return
+        if t == "HEARTBEAT":
             armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
             if armed != st.armed:
                 st.armed = armed
@@ -93,7 +109,7 @@ class Telemetry:
                 self._event("mode", st.mode)
             st.system_status = int(msg.system_status)
         elif t == "SYS_STATUS":
-            if msg.voltage_battery != 65535:
+            if msg.voltage_battery != 65535 and v.voltage(msg.voltage_battery / 1000.0):
                 st.battery_voltage_v = msg.voltage_battery / 1000.0
             if msg.battery_remaining >= 0:
                 st.battery_remaining_pct = int(msg.battery_remaining)

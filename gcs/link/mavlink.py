@@ -5,6 +5,10 @@ ArduPilot Copter's conventions (``../shared/DESIGN.md``):
 
 * only frames from ``target_system`` count; others are dropped and counted;
 * garbled bytes (``BAD_DATA``) are counted and skipped, never raised;
+* UDP: every datagram is parsed on its own (a frame cut at a datagram's end is dropped,
+  never joined to the next datagram), and once the vehicle's address is known datagrams
+  from any other address are dropped and counted;
+* every outgoing message passes the output guard (:mod:`gcs.link.guard`) first;
 * :meth:`drain` returns every pending message without blocking (the
   ``recv_match(blocking=False, timeout=0.0)`` trap of pymavlink is avoided by
   calling ``recv_msg`` until it returns None);
@@ -17,8 +21,9 @@ The link knows nothing of the paper's frame; :mod:`gcs.flight.telemetry` convert
 from __future__ import annotations
 
 import errno
+import hashlib
 import os
-import socket
+import struct
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Iterable
@@ -32,8 +37,10 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 mavutil.set_dialect("ardupilotmega")
 
-from gcs.errors import GcsError
+from gcs.errors import ConfigError, GcsError
+from gcs.link.guard import OutputGuard, UnsafeCommand
 from gcs.link.base import MessageWaiter
+from sitl.signing import SignatureCheck, setup_signing
 
 __all__ = ["LinkError", "MavlinkLink", "LinkCounters", "connection_url", "COPTER_MODES"]
 
@@ -56,6 +63,16 @@ class LinkCounters:
     bad_data: int = 0
     other_system: int = 0
     unsigned_rejected: int = 0
+    #: Signed frames whose signature or time stamp failed (another key, a forgery, a replay).
+    bad_signature: int = 0
+    #: UDP datagrams from an address other than the vehicle's, once it is known (dropped unread).
+    other_address: int = 0
+    #: UDP datagrams that ended inside a frame (the partial frame is dropped, not joined to the next).
+    truncated: int = 0
+    #: Frames the parser could not take apart (counted, skipped).
+    malformed: int = 0
+    #: Outgoing messages the output guard blocked (never sent).
+    blocked: int = 0
     by_type: dict[str, int] = field(default_factory=dict)
 
 
@@ -91,12 +108,16 @@ class MavlinkLink(MessageWaiter):
 
     def __init__(self, url: str, *, baud: int = 57600, target_system: int = 1, target_component: int = 1,
                  source_system: int = 255, source_component: int = 190, signing_key: bytes | None = None,
-                 on_frame: Callable[[str, object], None] | None = None) -> None:
+                 on_frame: Callable[[str, object], None] | None = None, guard: OutputGuard | None = None) -> None:
         self.url = url
         self.target_system = target_system
         self.target_component = target_component
+        self.source_system = source_system
+        self.source_component = source_component
         self.counters = LinkCounters()
         self.on_frame = on_frame
+        #: Checks every outgoing message (:class:`~gcs.link.guard.OutputGuard`); None = none.
+        self.guard = guard
         try:
             self.conn = mavutil.mavlink_connection(url, baud=baud, source_system=source_system,
                                                    source_component=source_component, autoreconnect=False,
@@ -106,49 +127,37 @@ class MavlinkLink(MessageWaiter):
         self._pending: list = []
         #: Called while waiting for the heartbeat; raises if the peer cannot answer (a dead child).
         self.alive_check: Callable[[], None] | None = None
+        self.mav = self.conn.mav
+        self.signature_check: SignatureCheck | None = None
         if signing_key is not None:
             if len(signing_key) != 32:
                 raise LinkError(f"signing key must be 32 bytes, got {len(signing_key)}")
-            self.conn.setup_signing(signing_key, sign_outgoing=True, allow_unsigned_callback=self._allow_unsigned)
-        self.mav = self.conn.mav
+            # The signature is checked before any time stamp is stored (pymavlink's own check stores
+            # first: one forged frame would lock the link out); time stamps start at the wall clock.
+            self.signature_check = setup_signing(self.mav, signing_key, allow_unsigned_callback=self._allow_unsigned)
         self.last_heartbeat = None
-        self._last_addr = None
         self.vehicle_addr = None
-        if isinstance(self.conn, mavutil.mavudp) and self.conn.udp_server:
-            self.conn.recv = self._udp_recv
-
-    def _udp_recv(self, n=None) -> bytes:
-        """pymavlink's udpin receive, but replies go to the vehicle only once it is known.
-
-        pymavlink sends to every address that ever sent a datagram; any stray sender on the
-        port would then get our commands.  Once the target's first frame arrives its address
-        is the only destination.
-        """
-        conn = self.conn
-        try:
-            data, addr = conn.port.recvfrom(65535)
-        except socket.error as exc:
-            if exc.errno in (errno.EAGAIN, errno.EWOULDBLOCK, errno.ECONNREFUSED):
-                return b""
-            raise
-        self._last_addr = addr
-        if self.vehicle_addr is None or addr == self.vehicle_addr:
-            conn.clients.add(addr)
-            conn.clients_last_alive[addr] = time.time()
-        return data
+        self._udp = isinstance(self.conn, mavutil.mavudp)
 
     # ------------------------------------------------------------------ receive
     def _allow_unsigned(self, mav, msg_id: int) -> bool:
+        """pymavlink asks this for unsigned frames and for signed frames that failed their check."""
         if msg_id == mavlink.MAVLINK_MSG_ID_RADIO_STATUS:
             return True
-        self.counters.unsigned_rejected += 1
         return False
 
-    def _accept(self, msg) -> bool:
+    def _accept(self, msg, addr=None) -> bool:
         c = self.counters
         t = msg.get_type()
         if t == "BAD_DATA":
-            c.bad_data += 1
+            if getattr(msg, "reason", "") == "Invalid signature":
+                data = bytes(getattr(msg, "data", b"") or b"")
+                if len(data) > 2 and data[0] == mavlink.PROTOCOL_MARKER_V2 and data[2] & mavlink.MAVLINK_IFLAG_SIGNED:
+                    c.bad_signature += 1
+                else:
+                    c.unsigned_rejected += 1
+            else:
+                c.bad_data += 1
             if self.on_frame is not None:
                 self.on_frame("in", msg, False)
             return False
@@ -157,9 +166,13 @@ class MavlinkLink(MessageWaiter):
             if self.on_frame is not None:
                 self.on_frame("in", msg, False)
             return False
-        if self.vehicle_addr is None and self._last_addr is not None:
-            self.vehicle_addr = self._last_addr
-            self.conn.clients.intersection_update({self.vehicle_addr})
+        if self._udp and self.vehicle_addr is None and addr is not None:
+            # The vehicle's address: from now on the only destination and the only source.
+            self.vehicle_addr = addr
+            if self.conn.udp_server:
+                self.conn.clients.clear()
+                self.conn.clients.add(addr)
+                self.conn.clients_last_alive[addr] = time.time()
         c.received += 1
         c.by_type[t] = c.by_type.get(t, 0) + 1
         if t == "HEARTBEAT" and msg.get_srcComponent() == self.target_component:
@@ -168,15 +181,55 @@ class MavlinkLink(MessageWaiter):
             self.on_frame("in", msg, True)
         return True
 
+    def _parse(self, data: bytes) -> list:
+        """Every message in ``data`` (BAD_DATA included); pymavlink failures on hostile bytes are counted."""
+        try:
+            return self.mav.parse_buffer(data) or []
+        except Exception:  # noqa: BLE001 - pymavlink can raise anything (struct.error, IndexError...) on hostile bytes
+            self.counters.malformed += 1
+            reset_parser(self.mav)
+            return []
+
+    def _drain_udp(self, out: list) -> list:
+        port = self.conn.port
+        while True:
+            try:
+                data, addr = port.recvfrom(65535)
+            except (BlockingIOError, InterruptedError):
+                return out
+            except OSError as exc:
+                if exc.errno in (errno.EAGAIN, errno.EWOULDBLOCK, errno.ECONNREFUSED):
+                    return out
+                raise LinkError(f"link {self.url!r} failed: {exc}") from None
+            if self.vehicle_addr is not None and addr != self.vehicle_addr:
+                self.counters.other_address += 1
+                continue
+            if self.conn.udp_server and self.vehicle_addr is None:
+                # pymavlink's udpin answers every address that ever sent: until the vehicle is known.
+                self.conn.clients.add(addr)
+                self.conn.clients_last_alive[addr] = time.time()
+            for msg in self._parse(data):
+                if self._accept(msg, addr):
+                    out.append(msg)
+            if self.mav.buf_len() > 0:  # a frame cut at the end of the datagram: never joined to the next one
+                self.counters.truncated += 1
+                reset_parser(self.mav)
+
     def drain(self) -> list:
         """Every message waiting now from the target system (never blocks)."""
         out, self._pending = self._pending, []
+        if self._udp:
+            return self._drain_udp(out)
         recv = self.conn.recv_msg
         while True:
             try:
                 msg = recv()
-            except (OSError, ValueError) as exc:
+            except (OSError, serial_errors()) as exc:
                 raise LinkError(f"link {self.url!r} failed: {exc}") from None
+            except Exception:  # noqa: BLE001 - a parser failure on hostile bytes: counted, skipped
+                self.counters.malformed += 1
+                reset_parser(self.mav)
+                continue
             if msg is None:
                 return out
             if self._accept(msg):
@@ -198,11 +251,39 @@ class MavlinkLink(MessageWaiter):
             if hb is not None:
                 return hb
         raise LinkError(f"no HEARTBEAT from system {self.target_system} component {self.target_component} "
-                        f"on {self.url} within {timeout_s:g} s")
+                        f"on {self.url} within {timeout_s:g} s{self.signing_diagnosis()}")
+
+    def signing_diagnosis(self) -> str:
+        """Why signed traffic may have been refused (empty when it was not)."""
+        c = self.counters
+        chk = self.signature_check
+        if chk is not None and chk.bad_signature:
+            return (f"; {chk.bad_signature} signed frames failed the signature check: is --signing-key the "
+                    "vehicle's key?")
+        if chk is not None and (chk.replayed or chk.stale_timestamp):
+            return (f"; {chk.replayed + chk.stale_timestamp} signed frames refused for old time stamps (replayed, "
+                    "or the vehicle's clock is far behind)")
+        if c.unsigned_rejected:
+            return (f"; {c.unsigned_rejected} unsigned frames refused: the vehicle does not sign (is signing "
+                    "set up on it with this key?)")
+        return ""
 
     # ------------------------------------------------------------------ send
     def send(self, msg) -> None:
-        """Send a pymavlink message object."""
+        """Send a pymavlink message object, unless the output guard blocks it.
+
+        Raises
+        ------
+        UnsafeCommand
+            The guard found a non-finite or out-of-limit field; nothing was sent.
+        LinkError
+            The port failed.
+        """
+        if self.guard is not None:
+            reason = self.guard.check(msg)
+            if reason is not None:
+                self.counters.blocked += 1
+                raise UnsafeCommand(reason)
         try:
             self.mav.send(msg)
         except (OSError, ValueError) as exc:
@@ -226,15 +307,35 @@ class MavlinkLink(MessageWaiter):
         p = list(params) + [0.0] * (7 - len(list(params)))
         for attempt in range(retries + 1):
             self.send(self.mav.command_long_encode(self.target_system, self.target_component, command, attempt, *p[:7]))
-            ack = self.wait(lambda m: m.get_type() == "COMMAND_ACK" and m.command == command, timeout_s, on_message)
+            ack = self.wait(lambda m: self.is_our_ack(m, command), timeout_s, on_message)
+            while ack is not None and ack.result == mavlink.MAV_RESULT_IN_PROGRESS:
+                ack = self.wait(lambda m: self.is_our_ack(m, command) and m.result != mavlink.MAV_RESULT_IN_PROGRESS,
+                                timeout_s, on_message)
             if ack is not None:
                 return int(ack.result)
         raise LinkError(f"no COMMAND_ACK for command {command} after {retries + 1} tries")
 
+    def is_our_ack(self, msg, command: int) -> bool:
+        """A COMMAND_ACK of ``command`` from the autopilot, addressed to us (or to nobody in particular:
+        autopilots before MAVLink 2's target fields send 0) — never another ground station's."""
+        if msg.get_type() != "COMMAND_ACK" or msg.command != command:
+            return False
+        if msg.get_srcComponent() != self.target_component:
+            return False
+        ts = getattr(msg, "target_system", 0)
+        tc = getattr(msg, "target_component", 0)
+        return ts in (0, self.source_system) and tc in (0, self.source_component)
+
+    def send_message_interval(self, message_id: int, rate_hz: float) -> None:
+        """MAV_CMD_SET_MESSAGE_INTERVAL without waiting for its acknowledgement (the mission loop's re-request)."""
+        self.send(self.mav.command_long_encode(self.target_system, self.target_component,
+                                               mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 0, message_id,
+                                               _interval_us(rate_hz), 0, 0, 0, 0, 0))
+
     def set_message_interval(self, message_id: int, rate_hz: float, on_message=None) -> int:
         """MAV_CMD_SET_MESSAGE_INTERVAL (511): stream ``message_id`` at ``rate_hz``."""
-        interval_us = -1 if rate_hz <= 0 else int(round(1e6 / rate_hz))
-        return self.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, [message_id, interval_us], on_message=on_message)
+        return self.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, [message_id, _interval_us(rate_hz)],
+                                 on_message=on_message)
 
     def set_mode(self, mode: str, on_message=None) -> int:
         """MAV_CMD_DO_SET_MODE with an ArduCopter custom mode name."""
@@ -258,20 +359,65 @@ class MavlinkLink(MessageWaiter):
         raise LinkError(f"no PARAM_VALUE for {name} after {retries + 1} tries")
 
     def param_set(self, name: str, value: float, timeout_s: float = 3.0, retries: int = 2, on_message=None) -> float:
-        """PARAM_SET, confirmed by the PARAM_VALUE echo; returns the value the vehicle holds."""
+        """PARAM_SET, confirmed by a PARAM_VALUE that carries the value set; returns the value the vehicle holds.
+
+        A PARAM_VALUE with another value may be a stale or duplicated one sent before our
+        PARAM_SET: it is not taken as the answer.  When only such values come back, the
+        parameter is read once more and what the vehicle reports is returned (the caller
+        decides whether that is a refusal).
+        """
+        seen: float | None = None
         for _ in range(retries + 1):
             self.send(self.mav.param_set_encode(self.target_system, self.target_component, name.encode(), float(value),
                                                 mavlink.MAV_PARAM_TYPE_REAL32))
-            pv = self.wait(lambda m: m.get_type() == "PARAM_VALUE" and _param_id(m) == name, timeout_s, on_message)
+            pv = self.wait(lambda m: m.get_type() == "PARAM_VALUE" and _param_id(m) == name
+                           and _same_float32(m.param_value, value), timeout_s, on_message)
             if pv is not None:
                 return float(pv.param_value)
-        raise LinkError(f"no PARAM_VALUE echo for {name} after {retries + 1} tries")
+        try:
+            seen = self.param_get(name, timeout_s=timeout_s, retries=0, on_message=on_message)
+        except LinkError:
+            seen = None
+        if seen is None:
+            raise LinkError(f"no PARAM_VALUE echo for {name} after {retries + 1} tries")
+        return seen
 
     def close(self) -> None:
         try:
             self.conn.close()
         except OSError:
             pass
+
+
+def _interval_us(rate_hz: float) -> int:
+    """SET_MESSAGE_INTERVAL's interval [us] for a rate [Hz] (<= 0: stop the stream)."""
+    return -1 if not rate_hz > 0 else max(1, int(round(1e6 / rate_hz)))
+
+
+def _same_float32(a: float, b: float) -> bool:
+    """Equal once both are rounded to float32 (PARAM_VALUE carries a float32)."""
+    pack = struct.Struct("<f")
+    try:
+        return pack.pack(a) == pack.pack(b)
+    except (OverflowError, struct.error):
+        return False
+
+
+def reset_parser(mav) -> None:
+    """Drop whatever partial frame a pymavlink parser holds."""
+    mav.buf = bytearray()
+    mav.buf_index = 0
+    mav.expected_length = mavlink.HEADER_LEN_V1 + 2
+    mav.have_prefix_error = False
+
+
+def serial_errors() -> type[Exception]:
+    """pyserial's exception class (an OSError subclass on recent versions)."""
+    try:
+        from serial import SerialException
+    except ImportError:  # pragma: no cover - pyserial is a dependency
+        return OSError
+    return SerialException
 
 
 def _param_id(msg) -> str:
@@ -282,13 +428,18 @@ def _param_id(msg) -> str:
 
 
 def read_signing_key(path: str) -> bytes:
-    """A 32-byte key from a file: raw 32 bytes, or 64 hex characters, or a passphrase (SHA-256 of it)."""
-    import hashlib
+    """A 32-byte key from a file: raw 32 bytes, or 64 hex characters, or a passphrase (SHA-256 of it).
 
+    Raises
+    ------
+    ConfigError
+        The file cannot be read or is empty (a bad option: exit 2).
+    """
     try:
-        data = open(path, "rb").read()
+        with open(path, "rb") as fh:
+            data = fh.read(4096)
     except OSError as exc:
-        raise LinkError(f"cannot read signing key {path!r}: {exc.strerror or exc}") from None
+        raise ConfigError("--signing-key", "", f"cannot read {path!r}: {exc.strerror or exc}") from None
     if len(data) == 32:
         return data
     text = data.strip()
@@ -298,5 +449,5 @@ def read_signing_key(path: str) -> bytes:
     except ValueError:
         pass
     if not text:
-        raise LinkError(f"signing key file {path!r} is empty")
+        raise ConfigError("--signing-key", "", f"{path!r} is empty")
     return hashlib.sha256(text).digest()

@@ -18,6 +18,7 @@ from typing import Callable
 import serial
 
 from gcs.link.base import MessageWaiter
+from gcs.link.guard import OutputGuard, UnsafeCommand
 from gcs.link.mavlink import LinkError
 from sitl import rig_protocol as rp
 
@@ -75,6 +76,8 @@ class RigLink(MessageWaiter):
         self.sent_bytes = 0
         self._seq8 = 0
         self._pending: list[rp.Message] = []
+        #: Checks every outgoing message (:class:`~gcs.link.guard.OutputGuard`); None = none.
+        self.guard: OutputGuard | None = None
 
     @property
     def counters(self) -> rp.DecoderCounters:
@@ -105,7 +108,19 @@ class RigLink(MessageWaiter):
             time.sleep(max(0.0, min(timeout_s, 0.001)))
 
     def send(self, msg: rp.Message) -> None:
-        """Encode and write one message."""
+        """Encode and write one message, unless the output guard blocks it.
+
+        Raises
+        ------
+        UnsafeCommand
+            The guard found a non-finite or out-of-limit field; nothing was sent.
+        LinkError
+            The port failed.
+        """
+        if self.guard is not None:
+            reason = self.guard.check(msg)
+            if reason is not None:
+                raise UnsafeCommand(reason)
         frame = rp.encode(msg)
         try:
             self.serial.write(frame)

@@ -144,4 +144,8 @@ def _flight(log, path: str, inp, out) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except OSError as exc:  # the disk failed under the writer: one line, no traceback (the parent warns)
+        print(f"gcs log writer: {exc.strerror or exc}", file=sys.stderr)
+        sys.exit(1)

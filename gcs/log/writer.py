@@ -104,6 +104,8 @@ def check_writable(path: str | os.PathLike, expected_bytes: int = 0, *, min_free
     p = Path(path)
     if p.is_dir():
         raise LogError(f"{p}: is a directory, not a log file name")
+    if p.exists() and not p.is_file():
+        raise LogError(f"{p}: not a regular file (a device or a pipe cannot hold a log)")
     parent = p.parent if str(p.parent) else Path(".")
     try:
         parent.mkdir(parents=True, exist_ok=True)
@@ -372,7 +374,10 @@ class FlightLog:
             self._writer.start(profile=PROFILE, library=f"gcs/{__version__} mcap-python")
             self._file.flush()
         except OSError as exc:
-            self._file.close()
+            try:
+                self._file.close()
+            except OSError:
+                pass  # closing flushes again into the same full disk
             raise LogError(f"{self.path}: cannot write: {exc.strerror or exc}") from None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None

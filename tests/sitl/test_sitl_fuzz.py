@@ -97,15 +97,15 @@ def alive(srv: SitlServer) -> None:
     k = srv.sim.world.kinematics
     assert all(math.isfinite(v) for v in k)
     before = srv.counters.frames_in
-    srv._process([("probe", pack(M.MAVLink_param_request_read_message(0, 0, b"GUID_TIMEOUT", -1)), True)])
+    srv._process([((0, "probe"), pack(M.MAVLink_param_request_read_message(0, 0, b"GUID_TIMEOUT", -1)), True)])
     assert srv.counters.frames_in == before + 1
-    srv._out.clear()
+    srv.links.discard()
 
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.binary(max_size=600), st.booleans())
 def test_random_bytes_never_crash(harness, data, datagram):
-    harness._process([("fuzz", data, datagram)])
+    harness._process([((0, "fuzz"), data, datagram)])
     alive(harness)
 
 
@@ -114,7 +114,7 @@ def test_random_bytes_never_crash(harness, data, datagram):
 def test_mutated_frames_never_crash(harness, msgs, data, datagram):
     frames = [pack(m) for m in msgs]
     blob = b"".join(mutate(f, data) if data.draw(st.booleans()) else f for f in frames)
-    harness._process([("mutant", blob, datagram)])
+    harness._process([((0, "mutant"), blob, datagram)])
     alive(harness)
 
 
@@ -122,7 +122,7 @@ def test_mutated_frames_never_crash(harness, msgs, data, datagram):
 @given(messages)
 def test_hostile_field_values_never_crash(harness, msg):
     errors = harness.counters.handler_errors
-    harness._process([("hostile", pack(msg), True)])
+    harness._process([((0, "hostile"), pack(msg), True)])
     assert harness.counters.handler_errors == errors       # handled, not merely survived
     harness.sim.params.set("SYSID_THISMAV", 1)              # keep the harness addressable
     alive(harness)
@@ -135,14 +135,15 @@ def test_bad_input_is_counted(harness):
     bad_crc[-1] ^= 0xFF
     unknown = bytearray(pack(M.MAVLink_heartbeat_message(1, 2, 3, 4, 5, 3)))
     unknown[7] = 0xEE    # msgid low byte -> an id the dialect does not know (CRC cannot match either)
-    harness._process([("c", b"\x00\x01garbage", True), ("c", bytes(bad_crc), True), ("c", good[:-3], True),
-                      ("c", pack(M.MAVLink_command_long_message(9, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)), True)])
+    peer = (0, "c")
+    harness._process([(peer, b"\x00\x01garbage", True), (peer, bytes(bad_crc), True), (peer, good[:-3], True),
+                      (peer, pack(M.MAVLink_command_long_message(9, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)), True)])
     c = harness.counters.as_dict()
     assert c["bad_prefix"] > c0["bad_prefix"] and c["garbage_bytes"] >= c0["garbage_bytes"] + 9
     assert c["bad_crc"] == c0["bad_crc"] + 1
     assert c["truncated"] == c0["truncated"] + 1
     assert c["wrong_target"] == c0["wrong_target"] + 1
-    harness._out.clear()
+    harness.links.discard()
 
 
 @pytest.fixture(scope="module")

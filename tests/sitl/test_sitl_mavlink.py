@@ -296,9 +296,12 @@ def test_tcp_endpoint(make_server, make_gcs):
     assert gcs.arm().result == M.MAV_RESULT_ACCEPTED
     for _ in range(50):
         gcs.step(0.9)
-    second = make_gcs(srv, hello=False)                # a second client gets the telemetry too
-    gcs.step(0.9)
-    assert second.recv("LOCAL_POSITION_NED", 2.0) is not None
+    second = make_gcs(srv, hello=False)                # a second connection is a link of its own:
+    assert second.request(M.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 100).result == M.MAV_RESULT_ACCEPTED
+    first = gcs.step(0.9)                              # the first one's streams are unchanged
+    got = second.recv("LOCAL_POSITION_NED", 2.0)       # and the second gets what it asked for
+    assert got is not None and got.time_boot_ms == first.time_boot_ms
+    assert "ATTITUDE" not in second.log                # and nothing it did not ask for
 
 
 def test_serial_pty_endpoint_with_baud_limit(make_server, make_gcs):

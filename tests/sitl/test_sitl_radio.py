@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import random
 
 import pytest
@@ -56,7 +57,8 @@ def test_loss_is_seeded():
 
 
 def test_radio_params_validation():
-    for bad in (dict(baud=-1), dict(loss=1.5), dict(latency_s=-0.1), dict(queue_bytes=10)):
+    for bad in (dict(baud=-1), dict(loss=1.5), dict(latency_s=-0.1), dict(latency_s=math.inf),
+                dict(latency_s=math.nan), dict(queue_bytes=10)):
         with pytest.raises(ValueError):
             RadioParams(**bad)
     assert not RadioParams().active and RadioParams(baud=57600).active
