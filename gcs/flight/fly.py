@@ -221,8 +221,8 @@ class Flight(FlightLoop):
         if not self._armed_sent:
             return
         self._pump()
-        if not self.telemetry.status.armed:
-            return
+        # Sent whatever the vehicle last reported: a refusal may come exactly because its report of
+        # the arming was lost (disarming a disarmed vehicle on the ground is harmless).
         try:
             self.link.arm(False, on_message=self._handle)
             self._wait_for("disarm", lambda: not self.telemetry.status.armed, 3.0, send=False)
