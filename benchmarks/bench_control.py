@@ -33,7 +33,8 @@ from benchlib import document, emit, met_text, row
 from gcs.config import load_config
 from gcs.control import CONTROLLERS, make_controller
 from gcs.control.loc import finite_horizon_lqr
-from gcs.model import State, linear_psi, linear_x_theta, linear_y_phi, linear_z
+from quadrotor.state import State
+from gcs.model import linear_psi, linear_x_theta, linear_y_phi, linear_z
 from gcs.sim import SimOptions, simulate
 
 TARGET_STEP_US = 15.0

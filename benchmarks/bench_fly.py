@@ -83,7 +83,7 @@ def bare_stages(n: int = 3000) -> dict:
     from gcs.config import load_config
     from gcs.control import make_controller, model_params
     from gcs.estimate import StateEstimator
-    from gcs.model import Command, State
+    from quadrotor.state import Command, State
 
     config = load_config(CONFIG)
     ctl = make_controller(CONTROLLER, config)

@@ -16,7 +16,7 @@ Baselines, the same messages through raw pymavlink (``mavlink.MAVLink``):
 codec), and the codec plus the bare socket call (``sendto`` / ``recvfrom``), so the
 difference splits into socket and wrapper.  Batches of 50 frame pairs are sent, then
 drained (the socket buffer holds them all); the figures are the median over batches
-of the time per message.  The rig's XBee protocol (``sitl.rig_protocol`` encode and
+of the time per message.  The rig's XBee protocol (``quadrotor.rig_protocol`` encode and
 ``RigDecoder.feed``) is measured by ``bench_rig.py`` (frames/s); it is not repeated here.
 """
 

@@ -40,7 +40,7 @@ from gcs.log import FlightLog
 from gcs.log.meta import write_run_header
 from gcs.log.review import log_metrics
 from gcs.log.simlog import BackgroundSimLog
-from gcs.model import Command, State
+from quadrotor.state import Command, State
 from gcs.sim import SimOptions, simulate
 
 TARGET_TICK_US = 50.0

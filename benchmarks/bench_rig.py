@@ -6,10 +6,10 @@ Run::
 
 Prints the median of ``N`` repetitions for:
 
-* ``decode``: :class:`sitl.rig_protocol.RigDecoder` on a recorded stream of
+* ``decode``: :class:`quadrotor.rig_protocol.RigDecoder` on a recorded stream of
   TELEMETRY frames from an emulated hover (noisy sensors), fed in 64-byte
   chunks (a serial read) and as one 64 kB block, in frames per second;
-* ``encode``: :func:`sitl.rig_protocol.encode` of the same messages;
+* ``encode``: :func:`quadrotor.rig_protocol.encode` of the same messages;
 * ``link``: the share of the 115200-baud line (10 bits per byte) used by the
   100 Hz exchange, from the actual encoded sizes (escaping included):
   TELEMETRY at 200 Hz plus STATUS at 1 Hz down, CONTROL (or CONTROL_PWM)
@@ -34,8 +34,8 @@ import time
 import serial
 
 from benchlib import document, emit, row
-from sitl import rig_protocol as rp
-from sitl.clock import MonotonicClock
+from quadrotor import rig_protocol as rp
+from quadrotor.clock import MonotonicClock
 from sitl.radio import RadioParams
 from sitl.rig import RigServer
 from sitl.rig_firmware import RigFirmware
@@ -127,7 +127,7 @@ def bench_emulator(sim_seconds: float, repeat: int) -> float:
 def bench_lockstep(steps: int, baud: int) -> float:
     clock = MonotonicClock()
     radio = RadioParams(baud=baud) if baud else None
-    with RigServer(PtyTransport(clock.monotonic_ns), lockstep=True, radio=radio, clock=clock) as rig:
+    with RigServer(PtyTransport(clock.now_ns), lockstep=True, radio=radio, clock=clock) as rig:
         port = serial.Serial(rig.connection_string, BAUD, timeout=0)
         dec = rp.RigDecoder(rp.TO_PC)
         try:

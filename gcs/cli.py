@@ -23,7 +23,7 @@ from typing import Sequence
 from gcs import __version__
 from gcs.config import MATRIX_MODES, bundled_configs, load_config
 from gcs.control import CONTROLLERS
-from gcs.errors import ConfigError, GcsError
+from quadrotor.errors import ConfigError, QuadrotorError
 from gcs.metrics import METRICS
 
 __all__ = ["main", "build_parser", "format_table"]
@@ -224,7 +224,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 0
         parser.print_help()
         return 2
-    except GcsError as exc:
+    except QuadrotorError as exc:
         print(f"gcs: error: {exc}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:

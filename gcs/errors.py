@@ -1,33 +1,19 @@
-"""The ground station's exception hierarchy.
+"""The ground station's exception hierarchy (under :class:`quadrotor.errors.QuadrotorError`).
 
-Every error the user can cause derives from :class:`GcsError`; the CLI prints
-its message and exits non-zero without a traceback.
+Every error the user can cause derives from :class:`~quadrotor.errors.QuadrotorError`; the CLI
+prints its message and exits with its ``exit_code`` without a traceback.  :class:`ConfigError`
+(exit 2) is shared with the simulator.
 """
 
-__all__ = ["GcsError", "ConfigError", "DesignError"]
+from quadrotor.errors import ConfigError, QuadrotorError
+
+__all__ = ["GcsError", "ConfigError", "DesignError", "LogError"]
 
 
-class GcsError(Exception):
-    """Base class of all errors raised on purpose by ``gcs``."""
+class GcsError(QuadrotorError):
+    """Base class of the errors raised on purpose by ``gcs`` (other than :class:`ConfigError`)."""
 
     exit_code = 1
-
-
-class ConfigError(GcsError, ValueError):
-    """A configuration file or option is invalid.
-
-    The message names the file, the key and the reason, e.g.
-    ``configs/x.toml: nlsoc.z_psi.Q: not symmetric (Q[3,4] = 17000 != Q[4,3] = 17500)``.
-    """
-
-    exit_code = 2
-
-    def __init__(self, source: str, key: str, reason: str) -> None:
-        self.source = source
-        self.key = key
-        self.reason = reason
-        where = f"{source}: {key}" if key else source
-        super().__init__(f"{where}: {reason}")
 
 
 class DesignError(GcsError, ValueError):
@@ -37,6 +23,3 @@ class DesignError(GcsError, ValueError):
 class LogError(GcsError):
     """A flight log cannot be written or read: unwritable directory, full disk,
     missing file, not an MCAP log, or an MCAP log without what a tool needs."""
-
-
-__all__.append("LogError")

@@ -23,7 +23,9 @@ from typing import Sequence
 import numpy as np
 import scipy.linalg
 
-from gcs.model import Command, ModelParams, State
+from quadrotor.state import Command, State
+from quadrotor.dynamics import eq1_acceleration
+from gcs.model import ModelParams
 
 __all__ = ["kalman_gain_cv", "AxisFilter", "StateEstimator"]
 
@@ -88,12 +90,10 @@ class AxisFilter:
 
 
 def model_acceleration(model: ModelParams, command: Command | None, roll: float, pitch: float) -> tuple[float, float, float]:
-    """Acceleration [m/s^2] (paper frame) of the reduced model under ``command`` (zero for None)."""
+    """Acceleration [m/s^2] (paper frame) of the reduced model (eq. 1) under ``command`` (zero for None)."""
     if command is None:
         return (0.0, 0.0, 0.0)
-    um = command[0] / model.mass_kg
-    cp = math.cos(pitch)
-    return (-um * math.sin(pitch), um * cp * math.sin(roll), um * cp * math.cos(roll) - model.gravity_m_s2)
+    return eq1_acceleration(command[0] / model.mass_kg, roll, pitch, model.gravity_m_s2)
 
 
 class StateEstimator:

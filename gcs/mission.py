@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from typing import Sequence
 
 from gcs.config import PhaseConfig
-from gcs.model import State
+from quadrotor.state import State
 
 __all__ = ["Mission", "Segment"]
 

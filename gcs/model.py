@@ -1,17 +1,7 @@
-"""The paper's reduced quadrotor model (eq. 1), its Euler discretisation and subsystem splits.
+"""The controllers' models of the quadrotor: eq. 1 discretised, and the paper's subsystem splits.
 
-Frame: the paper's, z **up**; x, y as MAVLink LOCAL_POSITION_NED (north, east);
-roll, pitch, yaw as MAVLink ATTITUDE.  All quantities in SI units.
-
-Continuous model::
-
-    m x'' = -u sin(theta)
-    m y'' =  u cos(theta) sin(phi)
-    m z'' =  u cos(theta) cos(phi) - m g
-    phi'' = tau_phi,  theta'' = tau_theta,  psi'' = tau_psi
-
-Inputs: collective thrust ``u`` [N] and angular accelerations ``tau`` [rad/s^2]
-(the model has unit inertia).
+Eq. 1 itself is :mod:`quadrotor.dynamics` (shared with the plant); here are its Euler
+discretisation and the linear subsystem models the designs use.
 
 Subsystems (the paper's splits), as index tuples into :class:`State`:
 
@@ -26,9 +16,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple, Sequence
+from typing import Sequence
 
 import numpy as np
+
+from quadrotor.dynamics import eq1_acceleration
+from quadrotor.state import Command, State
 
 __all__ = [
     "State", "Command", "ModelParams", "SUBSYSTEMS",
@@ -44,35 +37,6 @@ def tilt_cos(roll: float, pitch: float) -> float:
     """cos(pitch) cos(roll), floored at :data:`MIN_TILT_COS` (for thrust compensation)."""
     cc = math.cos(pitch) * math.cos(roll)
     return cc if cc > MIN_TILT_COS else MIN_TILT_COS
-
-
-class State(NamedTuple):
-    """Full state of the reduced model (same field order as ``sitl.reduced.PlantState``).
-
-    Positions [m], velocities [m/s], Euler angles [rad], Euler-angle rates [rad/s].
-    """
-
-    x: float = 0.0
-    y: float = 0.0
-    z: float = 0.0
-    vx: float = 0.0
-    vy: float = 0.0
-    vz: float = 0.0
-    roll: float = 0.0
-    pitch: float = 0.0
-    yaw: float = 0.0
-    roll_rate: float = 0.0
-    pitch_rate: float = 0.0
-    yaw_rate: float = 0.0
-
-
-class Command(NamedTuple):
-    """Controller output: thrust [N] and angular-acceleration demands [rad/s^2]."""
-
-    thrust_n: float
-    roll_accel_rad_s2: float
-    pitch_accel_rad_s2: float
-    yaw_accel_rad_s2: float
 
 
 #: Index tuples of the paper's subsystems into :class:`State`.
@@ -122,10 +86,7 @@ def continuous_dynamics(state: Sequence[float], command: Sequence[float], params
         raise ValueError("state must have 12 elements")
     u, tp, tt, tr = (float(c) for c in command)
     m, g = params.mass_kg, params.gravity_m_s2
-    phi, th = s[6], s[7]
-    acc = (-u * math.sin(th) / m,
-           u * math.cos(th) * math.sin(phi) / m,
-           u * math.cos(th) * math.cos(phi) / m - g)
+    acc = eq1_acceleration(u / m, s[6], s[7], g)
     return np.concatenate([s[3:6], acc, s[9:12], (tp, tt, tr)])
 
 

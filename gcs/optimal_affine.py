@@ -71,7 +71,8 @@ from gcs.config import Config
 from gcs.control import CONTROLLERS, Controller, make_controller
 from gcs.errors import DesignError
 from gcs.mission import Mission
-from gcs.model import SUBSYSTEMS, Command, State
+from gcs.model import SUBSYSTEMS
+from quadrotor.state import Command, State
 
 __all__ = [
     "affine_lqr", "affine_lqr_cost", "z_psi_affine_model", "reference_offsets",

@@ -1,7 +1,7 @@
 """In-process closed-loop simulation: plant, sensors, estimator, controller, one loop.
 
 The pieces are separate and swappable (rotorpy style): the plant step
-(``sitl.reduced.step``), the sensors and wind (``sitl``), the estimator
+(:func:`quadrotor.plant.step`), the sensors and wind (:mod:`quadrotor`), the estimator
 (:mod:`gcs.estimate`), the reference (:mod:`gcs.mission`) and the controller
 (:mod:`gcs.control`).  :func:`simulate` joins them in one loop; the plant is
 integrated by RK4 at ``plant_substep_s`` (1 ms) with the command held over the
@@ -29,11 +29,11 @@ from gcs.control import CONTROLLERS, Controller, FiniteHorizonController, make_c
 from gcs.estimate import StateEstimator
 from gcs.metrics import FlightRecord, controller_cost, flight_metrics, summarize
 from gcs.mission import Mission
-from gcs.model import State
-from sitl import reduced
-from sitl.sensors import Sensors
-from sitl.vehicle_params import short_repr
-from sitl.wind import Wind, WindParams
+from quadrotor.state import State
+from quadrotor import plant
+from quadrotor.sensors import Sensors
+from quadrotor.bounds import short_repr
+from quadrotor.wind import Wind, WindParams
 
 __all__ = ["SimOptions", "SimRun", "SimError", "simulate", "run_experiment", "ExperimentResult", "check_run",
            "MAX_STEPS", "MAX_RUNS"]
@@ -167,8 +167,8 @@ def simulate(config: Config, controller: str, *, run: int = 0, seed: int | None 
         estimator = StateEstimator(ts, model, (pos_std, pos_std, alt_std), config.estimator.accel_noise_std_m_s2)
 
     horizon = ctl if isinstance(ctl, FiniteHorizonController) else None
-    plant_step = reduced.step
-    state = reduced.PlantState()
+    plant_step = plant.step
+    state = State()
     states = [state]
     refs = []
     cmds = []

@@ -5,14 +5,14 @@ The physics never imports a link and never imports ``gcs`` internals.
 Modules of the networked SITL (``sitl`` command, :class:`sitl.server.SitlServer`):
 
 * plant: :mod:`sitl.rigid_body` (6-DOF, NED/FRD, motors, ground contact),
-  :mod:`sitl.mixer`, :mod:`sitl.reduced` (paper model, z up), :mod:`sitl.frames`
+  :mod:`sitl.mixer`, :mod:`quadrotor.plant` (paper model, z up), :mod:`quadrotor.frames`
   (the one paper/NED conversion), :mod:`sitl.world` (plant + wind + battery),
   :mod:`sitl.battery`, :mod:`sitl.vehicle_params` (vehicle TOML files);
 * autopilot: :mod:`sitl.ned_sensors`, :mod:`sitl.control`, :mod:`sitl.autopilot`,
   :mod:`sitl.params`, :mod:`sitl.simulation` (one tick of everything);
 * link: :mod:`sitl.telemetry`, :mod:`sitl.streams`, :mod:`sitl.dispatch`,
-  :mod:`sitl.endpoint`, :mod:`sitl.signing`, :mod:`sitl.links` (one link per peer),
-  :mod:`sitl.transport`, :mod:`sitl.radio`, :mod:`sitl.clock`, :mod:`sitl.server`,
+  :mod:`sitl.endpoint`, :mod:`quadrotor.mavlink.signing`, :mod:`sitl.links` (one link per peer),
+  :mod:`sitl.transport`, :mod:`sitl.radio`, :mod:`quadrotor.clock`, :mod:`sitl.server`,
   :mod:`sitl.options`, :mod:`sitl.cli`.
 """
 

@@ -53,9 +53,10 @@ import math
 from enum import IntEnum
 from typing import NamedTuple, Sequence
 
+from quadrotor.mavlink.modes import COPTER_MODES
 from sitl.battery import BatteryState
 from sitl.control import ClimbRateController, RateController, angle_boost, attitude_rate_demand
-from sitl.frames import quat_from_euler, quat_is_unit
+from quadrotor.frames import euler_to_quaternion, quat_is_unit
 from sitl.mixer import Mixer, MixResult
 from sitl.ned_sensors import ImuReading, NavReading
 from sitl.params import ParamStore
@@ -82,12 +83,12 @@ _BATT_LOW_TIMER_S = 10.0
 
 
 class Mode(IntEnum):
-    """ArduCopter custom modes emulated here."""
+    """The ArduCopter custom modes emulated here (numbers from :data:`quadrotor.mavlink.modes.COPTER_MODES`)."""
 
-    STABILIZE = 0
-    GUIDED = 4
-    LAND = 9
-    GUIDED_NOGPS = 20
+    STABILIZE = COPTER_MODES["STABILIZE"]
+    GUIDED = COPTER_MODES["GUIDED"]
+    LAND = COPTER_MODES["LAND"]
+    GUIDED_NOGPS = COPTER_MODES["GUIDED_NOGPS"]
 
 
 MODE_NAMES = {m.value: m.name for m in Mode}
@@ -428,7 +429,7 @@ class Autopilot:
                 self.failsafe = "battery"
 
     def _level_q(self) -> tuple[float, float, float, float]:
-        return quat_from_euler(0.0, 0.0, self._yaw_hold)
+        return euler_to_quaternion(0.0, 0.0, self._yaw_hold)
 
     def _ground_idle(self) -> tuple[float, float, float, float]:
         self._reset_loops()
@@ -503,7 +504,7 @@ class Autopilot:
             cy, sy = math.cos(self._yaw_hold), math.sin(self._yaw_hold)
             fwd = cy * an + sy * ae
             right = -sy * an + cy * ae
-            q = quat_from_euler(math.atan(right / g), -math.atan(fwd / g), self._yaw_hold)
+            q = euler_to_quaternion(math.atan(right / g), -math.atan(fwd / g), self._yaw_hold)
             thr = self._climb_throttle(-speed, dt, nav)
             return self._fly(q, (0.0, 0.0, 0.0), False, thr, True, dt, imu)
         # STABILIZE without RC: zero throttle.

@@ -26,16 +26,17 @@ import signal
 import sys
 from typing import NoReturn, Sequence
 
+from quadrotor.errors import QuadrotorError
 from sitl import options
-from sitl.clock import MonotonicClock
-from sitl.errors import SitlError, UsageError
+from quadrotor.clock import MonotonicClock
+from sitl.errors import UsageError
 from sitl.radio import RadioParams
 from sitl.rig import RIG_KINDS, RigServer
 from sitl.rig_dynamics import RigParams
 from sitl.rig_firmware import TICK_NS, RigSafetyParams
 from sitl.rig_sensors import RigSensorParams
 from sitl.server import SitlServer
-from sitl.signing import default_state_path
+from quadrotor.mavlink.signing import default_state_path
 from sitl.transport import PtyTransport
 from sitl.vehicle_params import MODELS, VehicleParams, bundled_vehicles, load_vehicle
 
@@ -203,7 +204,7 @@ def _run_rig(args: argparse.Namespace) -> int:
     ber = 0.0 if args.bit_error_rate is None else args.bit_error_rate
     baud = args.baud if args.baud is not None else 115200
     clock = MonotonicClock()
-    server = RigServer(PtyTransport(clock.monotonic_ns), lockstep=args.lockstep, control_period_s=args.period,
+    server = RigServer(PtyTransport(clock.now_ns), lockstep=args.lockstep, control_period_s=args.period,
                        seed=args.seed, radio=RadioParams(baud=baud, loss=args.loss, latency_s=args.latency),
                        bit_error_rate=ber, clock=clock)
     return _serve(server, f"rig {args.rig}", args)
@@ -269,7 +270,7 @@ def _run(args: argparse.Namespace) -> int:
         state = args.signing_state if args.signing_state is not None else default_state_path(key, sysid)
     radio = RadioParams(baud=baud, loss=args.loss, latency_s=args.latency)
     clock = MonotonicClock()
-    transports = options.open_endpoints(args.endpoints, clock.monotonic_ns)
+    transports = options.open_endpoints(args.endpoints, clock.now_ns)
     server = SitlServer(transports, vehicle=vehicle, lockstep=args.lockstep, control_period_s=args.period,
                         seed=args.seed, wind=wind, initial=initial, params=params, signing_key=key,
                         signing_state=state, radio=radio, clock=clock, prearm_delay_s=args.prearm_delay)
@@ -284,7 +285,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         format="sitl: %(levelname)s: %(message)s")
     try:
         return _run(args)
-    except SitlError as exc:
+    except QuadrotorError as exc:  # SitlError and the vehicle file's ConfigError
         print(f"sitl: error: {exc}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:

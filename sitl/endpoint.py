@@ -20,12 +20,12 @@ counted in :class:`LinkCounters`:
   stream more than a minute behind our timestamp, and unsigned frames
   (RADIO_STATUS excepted, as ArduPilot does for SiK radios).
 
-Signing (MAVLink 2, :mod:`sitl.signing`): with ``signing_key`` set, outgoing
+Signing (MAVLink 2, :mod:`quadrotor.mavlink.signing`): with ``signing_key`` set, outgoing
 frames are signed and every parser shares one signing state and one
-:class:`~sitl.signing.SignatureCheck` (signature first, then the timestamp
+:class:`~quadrotor.mavlink.signing.SignatureCheck` (signature first, then the timestamp
 rules).  The local timestamp starts at the wall clock and follows the newest
 valid incoming one.  With ``signing_state`` the timestamps are kept in a file
-(:class:`~sitl.signing.SigningStateFile`): loaded here, saved by
+(:class:`~quadrotor.mavlink.signing.SigningStateFile`): loaded here, saved by
 :meth:`MavlinkEndpoint.persist_signing`.
 """
 
@@ -38,8 +38,8 @@ from typing import Hashable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from sitl.signing import (REJECT_REPLAYED, REJECT_STALE, SignatureCheck, SigningStateFile,
-                          install_signature_check, setup_signing)
+from quadrotor.mavlink.framing import reset_parser
+from quadrotor.mavlink.signing import REJECT_REPLAYED, REJECT_STALE, SignatureCheck, SigningStateFile, install_signature_check, setup_signing
 
 __all__ = ["LinkCounters", "MavlinkEndpoint"]
 
@@ -89,13 +89,6 @@ class LinkCounters:
     def as_dict(self) -> dict[str, int]:
         """Plain dictionary (a snapshot)."""
         return asdict(self)
-
-
-def _reset(parser: mavlink.MAVLink) -> None:
-    parser.buf = bytearray()
-    parser.buf_index = 0
-    parser.expected_length = mavlink.HEADER_LEN_V1 + 2
-    parser.have_prefix_error = False
 
 
 class MavlinkEndpoint:
@@ -203,7 +196,7 @@ class MavlinkEndpoint:
             except Exception as exc:  # noqa: BLE001 - pymavlink may raise anything on hostile input
                 log.debug("parser failure from %s: %r", peer, exc)
                 c.malformed += 1
-                _reset(p)
+                reset_parser(p)
                 break
             chunk = b""
             if m is None:
@@ -214,7 +207,7 @@ class MavlinkEndpoint:
         if datagram and p.buf_len() > 0:
             c.truncated += 1
             c.malformed += 1
-            _reset(p)
+            reset_parser(p)
         return out
 
     def _classify(self, m: mavlink.MAVLink_message, out: list) -> None:

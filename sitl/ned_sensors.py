@@ -6,7 +6,7 @@ from a seeded :class:`numpy.random.Generator` drawn in blocks (one numpy
 call per 4096 samples), so a run is reproducible from its seed and the
 400 Hz loop pays no numpy call overhead.
 
-The paper-frame sensor model used by ``gcs sim`` stays in :mod:`sitl.sensors`.
+The paper-frame sensor model used by ``gcs sim`` stays in :mod:`quadrotor.sensors`.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from sitl.frames import Kinematics, euler_from_quat
+from quadrotor.frames import Kinematics, quaternion_to_euler
 from sitl.vehicle_params import SensorParams6
 
 __all__ = ["ImuReading", "NavReading", "NoiseSource", "NedSensors"]
@@ -116,7 +116,7 @@ class NedSensors:
             z = qz + qw * dz + qx * dy - qy * dx
             inv = 1.0 / math.sqrt(w * w + x * x + y * y + z * z)
             qw, qx, qy, qz = w * inv, x * inv, y * inv, z * inv
-        roll, pitch, yaw = euler_from_quat(qw, qx, qy, qz)
+        roll, pitch, yaw = quaternion_to_euler((qw, qx, qy, qz))
         sr = self._rate
         return _new(ImuReading, (roll, pitch, yaw, k.p + sr * n[3], k.q + sr * n[4], k.r + sr * n[5], qw, qx, qy, qz))
 

@@ -37,7 +37,7 @@ from sitl.params import ParamStore, ardupilot_params
 from sitl.simulation import InitialConditions
 from sitl.transport import PtyTransport, TcpTransport, Transport, UdpTransport, parse_host_port
 from sitl.vehicle_params import VehicleParams
-from sitl.wind import WindParams
+from quadrotor.wind import WindParams
 
 __all__ = ["EndpointAction", "check_common", "check_mavlink", "wind", "params", "signing_key", "initial",
            "open_endpoints", "DEFAULT_ENDPOINT", "MAX_SEED"]

@@ -3,7 +3,7 @@
 The rig of the paper's indoor experiments (section 4.1): a quadrotor on a
 4-DOF stand (x, z, roll, pitch) whose 200 Hz onboard autopilot talks to the
 PC over an XBee link at 115200 baud with the frames of
-:mod:`sitl.rig_protocol`.  The physics is :mod:`sitl.rig_dynamics`, the
+:mod:`quadrotor.rig_protocol`.  The physics is :mod:`sitl.rig_dynamics`, the
 sensors :mod:`sitl.rig_sensors`, the onboard logic (arming, cut-off,
 watchdog) :mod:`sitl.rig_firmware`; this module adds the link: a transport
 (normally :class:`~sitl.transport.PtyTransport`), the baud limit / loss /
@@ -14,10 +14,10 @@ Usage from Python (lockstep, serial port on a pseudo-terminal)::
     from sitl.rig import RigServer
     from sitl.transport import PtyTransport
     from sitl.radio import RadioParams
-    from sitl.clock import MonotonicClock
+    from quadrotor.clock import MonotonicClock
 
     clock = MonotonicClock()
-    with RigServer(PtyTransport(clock.monotonic_ns), lockstep=True, radio=RadioParams(baud=115200),
+    with RigServer(PtyTransport(clock.now_ns), lockstep=True, radio=RadioParams(baud=115200),
                    clock=clock, seed=1) as rig:
         port = serial.Serial(rig.connection_string, 115200, timeout=0.05)
         port.write(encode(Heartbeat(0)))      # the rig answers with STATUS
@@ -55,11 +55,11 @@ import socket
 import threading
 from typing import Any
 
-from sitl import rig_protocol as rp
-from sitl.clock import Clock, MonotonicClock
+from quadrotor import rig_protocol as rp
+from quadrotor.clock import Clock, MonotonicClock
 from sitl.errors import SitlError, UsageError
 from sitl.radio import RadioLink, RadioParams
-from sitl.reduced import PlantState
+from quadrotor.state import State
 from sitl.rig_dynamics import RigParams
 from sitl.rig_firmware import TICK_NS, RigFirmware, RigSafetyParams
 from sitl.rig_link import BitErrors
@@ -100,8 +100,8 @@ class RigServer:
     bit_error_rate : float
         Probability of flipping each bit, both directions.
     clock : Clock or None
-        Monotonic clock (default :class:`~sitl.clock.MonotonicClock`).
-    initial : PlantState or None
+        Monotonic clock (default :class:`~quadrotor.clock.MonotonicClock`).
+    initial : State or None
         Initial true state (default landed at the origin).
     """
 
@@ -109,7 +109,7 @@ class RigServer:
                  sensors: RigSensorParams | None = None, safety: RigSafetyParams | None = None,
                  lockstep: bool = False, control_period_s: float = 0.01, seed: int = 0,
                  radio: RadioParams | None = None, bit_error_rate: float = 0.0, clock: Clock | None = None,
-                 initial: PlantState | None = None) -> None:
+                 initial: State | None = None) -> None:
         try:
             ticks = control_period_s * 1e9 / TICK_NS
             if not 0 < control_period_s < math.inf or abs(ticks - round(ticks)) > 1e-6 or round(ticks) < 1:
@@ -234,7 +234,7 @@ class RigServer:
         try:
             with self._lock:
                 self._queue(self.firmware.status())
-                self._flush(self.clock.monotonic_ns())
+                self._flush(self.clock.now_ns())
             if self.lockstep:
                 self._run_lockstep()
             else:
@@ -245,10 +245,10 @@ class RigServer:
     # ------------------------------------------------------------------ loops
     def _run_realtime(self) -> None:
         fw = self.firmware
-        wall0 = self.clock.monotonic_ns()
+        wall0 = self.clock.now_ns()
         sim0 = fw.time_ns
         while not self._stop.is_set():
-            now = self.clock.monotonic_ns()
+            now = self.clock.now_ns()
             with self._lock:
                 self._process(self._poll_input(now))
                 self._greet_new_peers()
@@ -265,10 +265,10 @@ class RigServer:
             self._wait(wall0 + (fw.time_ns + TICK_NS - sim0))
 
     def _run_lockstep(self) -> None:
-        last_status = self.clock.monotonic_ns()
+        last_status = self.clock.now_ns()
         steps_seen = self.steps
         while not self._stop.is_set():
-            now = self.clock.monotonic_ns()
+            now = self.clock.now_ns()
             with self._lock:
                 self._process(self._poll_input(now))
                 self._greet_new_peers()
@@ -286,7 +286,7 @@ class RigServer:
             t = self.radio.next_event_ns()
             if t is not None and t < until_ns:
                 until_ns = t
-        timeout = max(0.0, (until_ns - self.clock.monotonic_ns()) * 1e-9)
+        timeout = max(0.0, (until_ns - self.clock.now_ns()) * 1e-9)
         rlist = [*self.transport.filenos(), self._wake_r.fileno()]
         wlist = self.transport.write_filenos()
         try:
@@ -326,7 +326,7 @@ class RigServer:
                     self._queue(r)
                 if is_control and self.lockstep:
                     self._step()
-                    self._flush(self.clock.monotonic_ns())
+                    self._flush(self.clock.now_ns())
 
     def _greet_new_peers(self) -> None:
         if self._greet:

@@ -6,7 +6,7 @@ to +-15 deg and pitch to +-60 deg.
 
 Model (paper frame, z up, SI units):
 
-* translation and attitude: :func:`sitl.reduced.step` (eq. 1 with linear air
+* translation and attitude: :func:`quadrotor.plant.step` (eq. 1 with linear air
   drag, RK4, ground contact at z = 0) in sub-steps of ``max_substep_s``; after
   each sub-step y, vy, yaw and yaw rate are reset to 0 (the bars take those
   forces and torques);
@@ -27,8 +27,8 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple, Sequence
 
-from sitl import reduced
-from sitl.reduced import PlantState
+from quadrotor import plant
+from quadrotor.state import State
 
 __all__ = ["RigParams", "RigStep", "mix", "unmix", "pwm_to_thrust", "step"]
 
@@ -88,11 +88,11 @@ class RigParams:
         return self.mass_kg * self.gravity_m_s2
 
     @property
-    def reduced(self) -> reduced.ReducedParams:
-        """The matching :class:`~sitl.reduced.ReducedParams` (saturation left to the motors)."""
+    def reduced(self) -> plant.ReducedParams:
+        """The matching :class:`~quadrotor.plant.ReducedParams` (saturation left to the motors)."""
         amax = 2.0 * self.max_motor_thrust_n * self.arm_length_m / min(self.inertia_roll_kg_m2,
                                                                       self.inertia_pitch_kg_m2)
-        return reduced.ReducedParams(mass_kg=self.mass_kg, gravity_m_s2=self.gravity_m_s2,
+        return plant.ReducedParams(mass_kg=self.mass_kg, gravity_m_s2=self.gravity_m_s2,
                                      max_thrust_n=self.max_thrust_n, max_angular_accel_rad_s2=amax,
                                      drag_n_per_m_s=self.drag_n_per_m_s, max_substep_s=self.max_substep_s)
 
@@ -135,7 +135,7 @@ def pwm_to_thrust(pwm: int, params: RigParams) -> float:
 class RigStep(NamedTuple):
     """Result of :func:`step`."""
 
-    state: PlantState
+    state: State
     roll_at_stop: bool
     pitch_at_stop: bool
 
@@ -149,13 +149,13 @@ def _stop(angle: float, rate: float, limit: float) -> tuple[float, float, bool]:
 
 
 def step(state: Sequence[float], motors: Sequence[float], dt: float, params: RigParams,
-         reduced_params: reduced.ReducedParams | None = None) -> RigStep:
+         reduced_params: plant.ReducedParams | None = None) -> RigStep:
     """Advance the rig by ``dt`` seconds with the motor thrusts held.
 
     Parameters
     ----------
     state : sequence of 12 floats
-        :class:`~sitl.reduced.PlantState` order (y, vy, yaw, yaw rate are ignored: locked at 0).
+        :class:`~quadrotor.plant.State` order (y, vy, yaw, yaw rate are ignored: locked at 0).
     motors : sequence of 4 floats
         f1..f4 [N], already within ``[0, max_motor_thrust_n]``.
     dt : float
@@ -178,10 +178,10 @@ def step(state: Sequence[float], motors: Sequence[float], dt: float, params: Rig
     x, _, z, vx, _, vz, phi, th, _, p, q, _ = (float(v) for v in state)
     phi, p, at_r = _stop(phi, p, params.roll_stop_rad)
     th, q, at_p = _stop(th, q, params.pitch_stop_rad)
-    s = PlantState(x, 0.0, z, vx, 0.0, vz, phi, th, 0.0, p, q, 0.0)
+    s = State(x, 0.0, z, vx, 0.0, vz, phi, th, 0.0, p, q, 0.0)
     for _ in range(n):
-        s = reduced.step(s, cmd, h, rp)
+        s = plant.step(s, cmd, h, rp)
         phi, p, at_r = _stop(s.roll, s.roll_rate, params.roll_stop_rad)
         th, q, at_p = _stop(s.pitch, s.pitch_rate, params.pitch_stop_rad)
-        s = PlantState(s.x, 0.0, s.z, s.vx, 0.0, s.vz, phi, th, 0.0, p, q, 0.0)
+        s = State(s.x, 0.0, s.z, s.vx, 0.0, s.vz, phi, th, 0.0, p, q, 0.0)
     return RigStep(s, at_r, at_p)

@@ -10,7 +10,7 @@ frame (or the descent controller, or off), (3) the plant over 5 ms,
 (4) safety checks on the new state, (5) sensors and one TELEMETRY frame
 stamped with the tick's end; every whole second of rig time also a STATUS.
 
-States (:class:`~sitl.rig_protocol.RigState`):
+States (:class:`~quadrotor.rig_protocol.RigState`):
 
 * DISARMED: motors off.  ARM is accepted only when landed (resting on the
   ground, z = 0 and vz = 0); the motors then idle (zero thrust) until the
@@ -41,10 +41,10 @@ import random
 from dataclasses import dataclass
 from typing import Any
 
-from sitl import rig_protocol as rp
-from sitl.reduced import PlantState
+from quadrotor import rig_protocol as rp
+from quadrotor.state import State
 from sitl.rig_dynamics import RigParams, mix, pwm_to_thrust, step
-from sitl.rig_protocol import AckResult, RigFlags, RigState
+from quadrotor.rig_protocol import AckResult, RigFlags, RigState
 from sitl.rig_sensors import RigSensorParams, RigSensors
 
 __all__ = ["RigSafetyParams", "RigFirmware", "FIRMWARE_VERSION", "TICK_NS"]
@@ -120,19 +120,19 @@ class RigFirmware:
         Seeds the sensor noise.
     rx_counters : DecoderCounters or None
         The serial decoder's counters, reported in STATUS.
-    initial : PlantState or None
+    initial : State or None
         Initial true state (default: landed at the origin).
     """
 
     def __init__(self, params: RigParams | None = None, sensors: RigSensorParams | None = None,
                  safety: RigSafetyParams | None = None, seed: int = 0,
-                 rx_counters: rp.DecoderCounters | None = None, initial: PlantState | None = None) -> None:
+                 rx_counters: rp.DecoderCounters | None = None, initial: State | None = None) -> None:
         self.params = params or RigParams()
         self.safety = safety or RigSafetyParams()
         self.sensors = RigSensors(sensors or RigSensorParams(), random.Random(f"{seed}/rig/sensors"))
         self.rx_counters = rx_counters if rx_counters is not None else rp.DecoderCounters()
         self._reduced = self.params.reduced
-        self.plant = initial if initial is not None else PlantState()
+        self.plant = initial if initial is not None else State()
         self.time_ns = 0
         self.state = RigState.DISARMED
         self.cut_causes = RigFlags(0)

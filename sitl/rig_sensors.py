@@ -125,7 +125,7 @@ class RigSensors:
         return (0.0 if reading < 0.0 else top if reading > top else reading), out
 
     def measure(self, state: Sequence[float]) -> RigReading:
-        """Readings for a :class:`~sitl.reduced.PlantState`."""
+        """Readings for a :class:`~quadrotor.state.State`."""
         p = self.params
         g = self._rng.gauss
         sa, sr = p.attitude_noise_std_rad, p.rate_noise_std_rad_s

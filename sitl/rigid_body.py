@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple, Sequence
 
-from sitl.frames import Kinematics, quat_from_euler
+from quadrotor.frames import Kinematics, euler_to_quaternion
 from sitl.vehicle_params import VehicleParams
 
 __all__ = ["RigidBodyState", "RigidBodyModel", "step", "rotor_wrench", "initial_state"]
@@ -68,7 +68,7 @@ class RigidBodyState(NamedTuple):
     on_ground: bool = True
 
     def kinematics(self) -> Kinematics:
-        """The rigid-body part as :class:`sitl.frames.Kinematics`."""
+        """The rigid-body part as :class:`quadrotor.frames.Kinematics`."""
         return Kinematics(*self[:13])
 
 
@@ -78,7 +78,7 @@ def initial_state(altitude_m: float = 0.0, roll: float = 0.0, pitch: float = 0.0
 
     At altitude 0 it is on the ground (possibly tilted: resting on a slope).
     """
-    qw, qx, qy, qz = quat_from_euler(roll, pitch, yaw)
+    qw, qx, qy, qz = euler_to_quaternion(roll, pitch, yaw)
     return RigidBodyState(0.0, 0.0, -altitude_m, 0.0, 0.0, 0.0, qw, qx, qy, qz,
                           on_ground=altitude_m <= 0.0)
 

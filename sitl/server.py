@@ -43,7 +43,7 @@ once.
 
 Signing
 -------
-With ``signing_key``, frames are verified by :mod:`sitl.signing` (signature
+With ``signing_key``, frames are verified by :mod:`quadrotor.mavlink.signing` (signature
 first, then timestamps); with ``signing_state`` the timestamps survive a
 restart (file written at most once a second and when the server closes), so a
 frame captured before the restart is refused.
@@ -61,7 +61,7 @@ from typing import Any, Mapping, Sequence
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from sitl.clock import Clock, MonotonicClock
+from quadrotor.clock import Clock, MonotonicClock
 from sitl.dispatch import Dispatcher
 from sitl.endpoint import LinkCounters, MavlinkEndpoint
 from sitl.errors import SitlError, UsageError
@@ -72,7 +72,7 @@ from sitl.streams import StreamScheduler
 from sitl.telemetry import TelemetryCounters, build, heartbeat
 from sitl.transport import Transport
 from sitl.vehicle_params import VehicleParams, load_vehicle
-from sitl.wind import WindParams
+from quadrotor.wind import WindParams
 
 __all__ = ["SitlServer"]
 
@@ -107,11 +107,11 @@ class SitlServer:
         32-byte MAVLink 2 signing key.
     signing_state : str, PathLike or None
         With a key: the file keeping the signing timestamps across restarts
-        (:class:`~sitl.signing.SigningStateFile`); None = in memory only.
+        (:class:`~quadrotor.mavlink.signing.SigningStateFile`); None = in memory only.
     radio : RadioParams or None
         Baud limit / loss / latency applied to both directions of every link.
     clock : Clock or None
-        Monotonic clock (default: :class:`~sitl.clock.MonotonicClock`).
+        Monotonic clock (default: :class:`~quadrotor.clock.MonotonicClock`).
     loop_rate_hz : int
         Inner-loop rate.
     prearm_delay_s : float
@@ -260,7 +260,7 @@ class SitlServer:
         try:
             with self._lock:
                 self.links.queue_all(heartbeat(self.sim))
-                self._flush(self.clock.monotonic_ns())
+                self._flush(self.clock.now_ns())
             if self.lockstep:
                 self._run_lockstep()
             else:
@@ -271,10 +271,10 @@ class SitlServer:
     # ------------------------------------------------------------------ loops
     def _run_realtime(self) -> None:
         tick_ns = self.sim.tick_ns
-        wall0 = self.clock.monotonic_ns()
+        wall0 = self.clock.now_ns()
         sim0 = self.sim.time_ns
         while not self._stop.is_set():
-            now = self.clock.monotonic_ns()
+            now = self.clock.now_ns()
             with self._lock:
                 self._process(self._poll_input(now))
                 self._greet_new_peers()
@@ -292,10 +292,10 @@ class SitlServer:
             self._wait(next_tick)
 
     def _run_lockstep(self) -> None:
-        last_hb = self.clock.monotonic_ns()
+        last_hb = self.clock.now_ns()
         steps_seen = self.steps
         while not self._stop.is_set():
-            now = self.clock.monotonic_ns()
+            now = self.clock.now_ns()
             with self._lock:
                 self._process(self._poll_input(now))
                 self._greet_new_peers()
@@ -312,7 +312,7 @@ class SitlServer:
         t = self.links.next_event_ns()
         if t is not None and t < until_ns:
             until_ns = t
-        timeout = max(0.0, (until_ns - self.clock.monotonic_ns()) * 1e-9)
+        timeout = max(0.0, (until_ns - self.clock.now_ns()) * 1e-9)
         rlist = [*self.links.filenos(), self._wake_r.fileno()]
         wlist = self.links.write_filenos()
         try:
@@ -347,7 +347,7 @@ class SitlServer:
                 self._drain_events()
                 if step and self.lockstep:
                     self._step()
-                    self._flush(self.clock.monotonic_ns())
+                    self._flush(self.clock.now_ns())
 
     def _greet_new_peers(self) -> None:
         # after the input that revealed them was handled

@@ -25,7 +25,7 @@ from sitl.ned_sensors import NedSensors
 from sitl.params import ParamStore, ardupilot_params
 from sitl.rigid_body import RigidBodyState, initial_state
 from sitl.vehicle_params import VehicleParams
-from sitl.wind import Wind, WindParams
+from quadrotor.wind import Wind, WindParams
 from sitl.world import World
 
 __all__ = ["Simulation", "InitialConditions"]

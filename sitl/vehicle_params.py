@@ -5,7 +5,7 @@ A vehicle file (``configs/vehicles/*.toml``, shipped as the package
 ``[battery]``, ``[sensors]``, ``[control]`` and ``[home]``; every key is
 optional except ``vehicle.mass_kg``, ``vehicle.inertia_kg_m2`` and the
 ``[rotors]`` geometry/limits.  Unknown sections or keys, wrong types and out
-of range values are rejected with a :class:`~sitl.errors.VehicleConfigError`
+of range values are rejected with a :class:`~sitl.errors.ConfigError`
 naming the file, the key and the reason.
 
 Rotor layout (ArduPilot QUAD/X numbering, FRD body frame, ``d = L/sqrt(2)``)::
@@ -23,19 +23,20 @@ from above, i.e. positive yaw) and ``k = rotors.yaw_moment_m``.
 from __future__ import annotations
 
 import math
-import reprlib
 import tomllib
 from dataclasses import dataclass, field, fields, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
-from sitl.errors import VehicleConfigError
+from quadrotor.bounds import (ATTITUDE_NOISE_RAD, DRAG_N_PER_M_S, GRAVITY_M_S2, INERTIA_KG_M2, MASS_KG, NOISE_M,
+                              RATE_NOISE_RAD_S, Bound, OutOfBounds, short_repr)
+from quadrotor.errors import ConfigError
 
 __all__ = [
     "VehicleParams", "RotorParams", "DragParams", "BatteryParams", "SensorParams6", "ControlParams",
     "HomeParams", "MODELS", "load_vehicle", "parse_vehicle", "bundled_vehicles", "DEFAULT_VEHICLE",
-    "Bound", "OutOfBounds", "VEHICLE_BOUNDS", "short_repr",
+    "VEHICLE_BOUNDS",
 ]
 
 MODELS = ("rigid_body", "reduced")
@@ -265,103 +266,23 @@ class VehicleParams:
     def with_model(self, model: str) -> "VehicleParams":
         """Copy with another plant model."""
         if model not in MODELS:
-            raise VehicleConfigError(self.source, "vehicle.model", f"must be one of {MODELS}, got {model!r}")
+            raise ConfigError(self.source, "vehicle.model", f"must be one of {MODELS}, got {model!r}")
         return replace(self, model=model)
 
 
 # --------------------------------------------------------------------------- ranges
 
-class OutOfBounds(ValueError):
-    """A value is not a finite number in its :class:`Bound` (the message says why)."""
-
-
-_REPR = reprlib.Repr()
-_REPR.maxlevel, _REPR.maxlist, _REPR.maxdict, _REPR.maxstring, _REPR.maxother = 3, 6, 4, 40, 40
-
-
-def short_repr(value: Any) -> str:
-    """``repr(value)`` cut short (deeply nested or huge values make no message unreadable)."""
-    if isinstance(value, int) and not isinstance(value, bool) and abs(value) > 10 ** 30:
-        return f"a {'negative ' if value < 0 else ''}{len(str(abs(value)))}-digit integer"
-    return _REPR.repr(value)
-
-
-def _fmt(x: float) -> str:
-    return str(x) if isinstance(x, int) else f"{x:g}"
-
-
-@dataclass(frozen=True)
-class Bound:
-    """The closed range ``[lo, hi]`` a number read from a file must lie in, with its unit and why.
-
-    Attributes
-    ----------
-    lo, hi : float
-        Smallest and largest allowed value.
-    unit : str
-        SI unit of the value ("" for none), shown in messages.
-    why : str
-        What the range stands for, shown in messages.
-    integer : bool
-        Only whole numbers (TOML integers) are allowed.
-    """
-
-    lo: float
-    hi: float
-    unit: str = ""
-    why: str = ""
-    integer: bool = False
-
-    def describe(self) -> str:
-        """``"allowed [lo, hi] unit (why)"``."""
-        unit = f" {self.unit}" if self.unit else ""
-        return f"allowed [{_fmt(self.lo)}, {_fmt(self.hi)}]{unit} ({self.why})"
-
-    def check(self, value: Any) -> float | int:
-        """``value`` as a float (an int for integer bounds) when it is a finite number in range.
-
-        Raises
-        ------
-        OutOfBounds
-            Not a number, not finite, or out of range; the message gives the allowed range.
-        """
-        kind = "an integer" if self.integer else "a number"
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or (self.integer and not isinstance(value, int)):
-            raise OutOfBounds(f"must be {kind}, got {short_repr(value)}; {self.describe()}")
-        unit = f" {self.unit}" if self.unit else ""
-        try:
-            v = value if self.integer else float(value)
-        except OverflowError:
-            raise OutOfBounds(f"must be at most {_fmt(self.hi)}{unit}, got {short_repr(value)}; "
-                              f"{self.describe()}") from None
-        if not math.isfinite(v):
-            raise OutOfBounds(f"must be finite, got {v!r}; {self.describe()}")
-        if v < self.lo:
-            if self.integer:
-                head = f"must be >= {_fmt(self.lo)}"
-            elif self.lo > 0 >= v:
-                head = "must be > 0"
-            elif self.lo == 0:
-                head = "must be >= 0"
-            else:
-                head = f"must be at least {_fmt(self.lo)}{unit}"
-            raise OutOfBounds(f"{head}, got {_fmt(v)}; {self.describe()}")
-        if v > self.hi:
-            raise OutOfBounds(f"must be at most {_fmt(self.hi)}{unit}, got {_fmt(v)}; {self.describe()}")
-        return v
-
-
-_NOISE_M = Bound(0.0, 10.0, "m", "sensor noise or resolution; 0 = none")
+_NOISE_M = NOISE_M
 _GAIN = Bound(0.0, 1000.0, "1/s", "an inner-loop gain of the 400 Hz autopilot")
 _IGAIN = Bound(0.0, 1e4, "1/s^2", "an integral gain")
 _THRUST = Bound(0.0, 1e4, "N", "one rotor's thrust")
-_DRAG = Bound(0.0, 100.0, "N/(m/s)", "linear air drag")
+_DRAG = DRAG_N_PER_M_S
 
 #: Allowed range of every number of a vehicle file, by key (``section.key``; vectors element by element).
 VEHICLE_BOUNDS: dict[str, Bound] = {
-    "vehicle.mass_kg": Bound(0.01, 100.0, "kg", "a quadrotor of 10 g to 100 kg"),
-    "vehicle.gravity_m_s2": Bound(1.0, 30.0, "m/s^2", "surface gravity; Earth 9.81"),
-    "vehicle.inertia_kg_m2": Bound(1e-6, 1e3, "kg m^2", "a principal moment of inertia"),
+    "vehicle.mass_kg": MASS_KG,
+    "vehicle.gravity_m_s2": GRAVITY_M_S2,
+    "vehicle.inertia_kg_m2": INERTIA_KG_M2,
     "rotors.arm_length_m": Bound(0.01, 5.0, "m", "centre to rotor axis"),
     "rotors.max_thrust_n": Bound(0.01, 1e4, "N", "one rotor's thrust"),
     "rotors.min_thrust_n": _THRUST, "rotors.idle_thrust_n": _THRUST,
@@ -378,8 +299,8 @@ VEHICLE_BOUNDS: dict[str, Bound] = {
     "battery.internal_resistance_ohm": Bound(0.0, 10.0, "ohm", "pack resistance"),
     "battery.initial_charge": Bound(0.0, 1.0, "", "state of charge"),
     "battery.avionics_current_a": Bound(0.0, 100.0, "A", "electronics draw"),
-    "sensors.attitude_noise_std_rad": Bound(0.0, 0.5, "rad", "IMU attitude noise; 0 = none"),
-    "sensors.rate_noise_std_rad_s": Bound(0.0, 10.0, "rad/s", "gyro noise; 0 = none"),
+    "sensors.attitude_noise_std_rad": ATTITUDE_NOISE_RAD,
+    "sensors.rate_noise_std_rad_s": RATE_NOISE_RAD_S,
     "sensors.baro_noise_std_m": _NOISE_M, "sensors.baro_resolution_m": _NOISE_M,
     "sensors.position_noise_std_m": _NOISE_M,
     "sensors.velocity_noise_std_m_s": Bound(0.0, 10.0, "m/s", "velocity noise; 0 = none"),
@@ -415,7 +336,7 @@ def _check(source: str, key: str, value: Any) -> Any:
     """``value`` of ``key`` checked against :data:`VEHICLE_BOUNDS` (booleans and 3-vectors too)."""
     if key in _BOOLEANS:
         if not isinstance(value, bool):
-            raise VehicleConfigError(source, key, f"must be true or false, got {short_repr(value)}")
+            raise ConfigError(source, key, f"must be true or false, got {short_repr(value)}")
         return value
     bound = VEHICLE_BOUNDS[key]
     try:
@@ -426,7 +347,7 @@ def _check(source: str, key: str, value: Any) -> Any:
             return tuple(bound.check(v) for v in value)
         return bound.check(value)
     except OutOfBounds as exc:
-        raise VehicleConfigError(source, key, str(exc)) from None
+        raise ConfigError(source, key, str(exc)) from None
 
 
 def _inertia(source: str, value: Any) -> Mat3:
@@ -452,7 +373,7 @@ def _inertia(source: str, value: Any) -> Mat3:
         for i in range(3):
             VEHICLE_BOUNDS[key].check(rows[i][i])
     except OutOfBounds as exc:
-        raise VehicleConfigError(source, key, str(exc)) from None
+        raise ConfigError(source, key, str(exc)) from None
     return tuple(tuple(r) for r in rows)  # type: ignore[return-value]
 
 
@@ -461,9 +382,9 @@ def _check_rates(params: VehicleParams) -> None:
     source, r, dr = params.source, params.rotors, params.drag
     for k in ("min_thrust_n", "idle_thrust_n"):
         if getattr(r, k) >= r.max_thrust_n:
-            raise VehicleConfigError(source, f"rotors.{k}", f"must be below max_thrust_n ({r.max_thrust_n})")
+            raise ConfigError(source, f"rotors.{k}", f"must be below max_thrust_n ({r.max_thrust_n})")
     if params.hover_thrust_fraction >= 0.9:
-        raise VehicleConfigError(source, "rotors.max_thrust_n",
+        raise ConfigError(source, "rotors.max_thrust_n",
                                  f"4 x {r.max_thrust_n} N cannot lift {params.mass_kg} kg with margin "
                                  f"(hover at {params.hover_thrust_fraction:.2f} of full thrust)")
     least_inertia = min(params.inertia_diagonal)
@@ -471,11 +392,11 @@ def _check_rates(params: VehicleParams) -> None:
                       ("drag.vertical_n_per_m_s", dr.vertical_n_per_m_s / params.mass_kg),
                       ("drag.rotational_n_m_s", dr.rotational_n_m_s / least_inertia)):
         if rate > MAX_DAMPING_1_S:
-            raise VehicleConfigError(source, key, f"damps at {rate:g} 1/s for this mass and inertia: at most "
+            raise ConfigError(source, key, f"damps at {rate:g} 1/s for this mass and inertia: at most "
                                                   f"{MAX_DAMPING_1_S:g} 1/s (a 2 ms time constant) integrates stably")
     accel = max(t / i for t, i in zip(params.max_torque_nm, params.inertia_diagonal, strict=True))
     if accel > MAX_ANGULAR_ACCEL_RAD_S2:
-        raise VehicleConfigError(source, "vehicle.inertia_kg_m2",
+        raise ConfigError(source, "vehicle.inertia_kg_m2",
                                  f"max torque / inertia = {accel:.3g} rad/s^2: at most {MAX_ANGULAR_ACCEL_RAD_S2:g} "
                                  f"rad/s^2 is physical (inertia too small for the rotors)")
 
@@ -498,27 +419,27 @@ def parse_vehicle(data: Mapping[str, Any], source: str = "<vehicle>") -> Vehicle
 
     Raises
     ------
-    VehicleConfigError
+    ConfigError
         Naming ``source``, the offending key and the reason (with the allowed range).
     """
     if not isinstance(data, Mapping):
-        raise VehicleConfigError(source, "", f"must be a table, got {short_repr(data)}")
+        raise ConfigError(source, "", f"must be a table, got {short_repr(data)}")
     for section, value in data.items():
         if section not in _SECTIONS:
-            raise VehicleConfigError(source, str(section), f"unknown section (known: {', '.join(_SECTIONS)})")
+            raise ConfigError(source, str(section), f"unknown section (known: {', '.join(_SECTIONS)})")
         if not isinstance(value, dict):
-            raise VehicleConfigError(source, section, "must be a table")
+            raise ConfigError(source, section, "must be a table")
     for section, keys in _REQUIRED.items():
         for k in keys:
             if k not in data.get(section, {}):
-                raise VehicleConfigError(source, f"{section}.{k}", "missing")
+                raise ConfigError(source, f"{section}.{k}", "missing")
     built: dict[str, Any] = {}
     for section, cls in _SECTIONS.items():
         table = dict(data.get(section, {}))
         allowed = _VEHICLE_KEYS if cls is None else tuple(f.name for f in fields(cls))
         for k in table:
             if k not in allowed:
-                raise VehicleConfigError(source, f"{section}.{k}", f"unknown key (known: {', '.join(allowed)})")
+                raise ConfigError(source, f"{section}.{k}", f"unknown key (known: {', '.join(allowed)})")
         if cls is None:
             continue
         kwargs = {k: _check(source, f"{section}.{k}", v) for k, v in table.items()}
@@ -528,11 +449,11 @@ def parse_vehicle(data: Mapping[str, Any], source: str = "<vehicle>") -> Vehicle
     for k in ("name", "description"):
         if k in v:
             if not isinstance(v[k], str):
-                raise VehicleConfigError(source, f"vehicle.{k}", f"must be a string, got {short_repr(v[k])}")
+                raise ConfigError(source, f"vehicle.{k}", f"must be a string, got {short_repr(v[k])}")
             kwargs[k] = v[k]
     if "model" in v:
         if not isinstance(v["model"], str) or v["model"] not in MODELS:
-            raise VehicleConfigError(source, "vehicle.model", f"must be one of {MODELS}, got {short_repr(v['model'])}")
+            raise ConfigError(source, "vehicle.model", f"must be one of {MODELS}, got {short_repr(v['model'])}")
         kwargs["model"] = v["model"]
     for k in ("mass_kg", "gravity_m_s2"):
         if k in v:
@@ -554,7 +475,7 @@ def load_vehicle(name_or_path: str | Path | None = None) -> VehicleParams:
 
     Raises
     ------
-    VehicleConfigError
+    ConfigError
         Unknown name, unreadable file, bad TOML (nesting too deep included) or invalid values.
     """
     spec = DEFAULT_VEHICLE if name_or_path is None else str(name_or_path)
@@ -564,13 +485,13 @@ def load_vehicle(name_or_path: str | Path | None = None) -> VehicleParams:
         try:
             text = path.read_text(encoding="utf-8")
         except OSError as exc:
-            raise VehicleConfigError(source, "", f"cannot read ({exc.strerror})") from None
+            raise ConfigError(source, "", f"cannot read ({exc.strerror})") from None
         except UnicodeDecodeError as exc:
-            raise VehicleConfigError(source, "", f"invalid TOML (not UTF-8: {exc.reason})") from None
+            raise ConfigError(source, "", f"invalid TOML (not UTF-8: {exc.reason})") from None
     else:
         stem = spec[:-5] if spec.endswith(".toml") else spec
         if "/" in spec or "\\" in spec or stem not in bundled_vehicles():
-            raise VehicleConfigError(spec, "", f"no such vehicle file or bundled vehicle "
+            raise ConfigError(spec, "", f"no such vehicle file or bundled vehicle "
                                                f"(bundled: {', '.join(bundled_vehicles())})")
         res = resources.files("sitl.vehicles") / f"{stem}.toml"
         source = f"sitl.vehicles/{stem}.toml"
@@ -578,7 +499,7 @@ def load_vehicle(name_or_path: str | Path | None = None) -> VehicleParams:
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise VehicleConfigError(source, "", f"invalid TOML ({exc})") from None
+        raise ConfigError(source, "", f"invalid TOML ({exc})") from None
     except RecursionError:
-        raise VehicleConfigError(source, "", "invalid TOML (arrays or tables nested too deeply)") from None
+        raise ConfigError(source, "", "invalid TOML (arrays or tables nested too deeply)") from None
     return parse_vehicle(data, source)

@@ -1,12 +1,12 @@
 """The simulated world of one vehicle: plant (6-DOF or reduced), motors, wind and battery.
 
 Two plants share one interface (:class:`RigidBodyPlant`, :class:`ReducedPlant`):
-``step(rotor_cmd_n, dt, wind_ned)`` and the NED :class:`~sitl.frames.Kinematics`
+``step(rotor_cmd_n, dt, wind_ned)`` and the NED :class:`~quadrotor.frames.Kinematics`
 they expose.  Both take rotor thrust commands, so the autopilot, mixer and
 motor lag are the same whichever plant flies; the reduced plant turns the
 lagged rotor thrusts into the paper's inputs (collective thrust [N] and
 angular accelerations ``tau / I`` [rad/s^2]) and its state into NED through
-:func:`sitl.frames.ned_from_paper` (the one conversion).
+:func:`quadrotor.frames.ned_from_paper` (the one conversion).
 """
 
 from __future__ import annotations
@@ -15,11 +15,13 @@ import math
 from typing import Sequence
 
 from sitl import battery as batt
-from sitl import reduced, rigid_body
-from sitl.frames import Kinematics, ned_from_paper, ned_wind_from_paper, paper_from_ned
+from quadrotor import plant as reduced
+from quadrotor.state import State
+from sitl import rigid_body
+from quadrotor.frames import Kinematics, ned_from_paper, ned_wind_from_paper, paper_from_ned
 from sitl.rigid_body import RigidBodyModel, RigidBodyState, rotor_wrench
 from sitl.vehicle_params import VehicleParams
-from sitl.wind import Wind
+from quadrotor.wind import Wind
 
 __all__ = ["RigidBodyPlant", "ReducedPlant", "World", "make_plant"]
 
@@ -72,7 +74,7 @@ class RigidBodyPlant:
 
 
 class ReducedPlant:
-    """The paper's reduced plant (:mod:`sitl.reduced`, z up) behind the NED interface.
+    """The paper's reduced plant (:mod:`quadrotor.plant`, z up) behind the NED interface.
 
     The motors (first-order lag, clipped to ``[0, max_thrust_n]``) are
     integrated here; the plant receives ``(sum T_i, tau_x / Ixx, tau_y / Iyy,
@@ -89,7 +91,7 @@ class ReducedPlant:
             mass_kg=vehicle.mass_kg, gravity_m_s2=vehicle.gravity_m_s2, max_thrust_n=vehicle.max_total_thrust_n,
             max_angular_accel_rad_s2=1.01 * amax, drag_n_per_m_s=vehicle.drag.linear_n_per_m_s,
             max_substep_s=max_substep_s)
-        self.state = reduced.PlantState(*paper_from_ned(initial.kinematics()))
+        self.state = State(*paper_from_ned(initial.kinematics()))
         self._thrusts = [initial.t1, initial.t2, initial.t3, initial.t4]
         self._tau = vehicle.rotors.time_constant_s
         self._tmax = vehicle.rotors.max_thrust_n

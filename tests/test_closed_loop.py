@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from gcs.control import make_controller
-from gcs.model import Command, State
+from quadrotor.state import Command, State
 from gcs.sim import SimOptions, run_experiment, simulate
 
 CONTROLLERS = ["nlsoc", "loc", "pd"]

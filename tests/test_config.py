@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from gcs.config import bundled_configs, load_config, parse_config
-from gcs.errors import ConfigError
+from quadrotor.errors import ConfigError
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 

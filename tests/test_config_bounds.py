@@ -19,11 +19,11 @@ from pathlib import Path
 import pytest
 
 from gcs.config import BOUNDS, PhaseConfig, bound_for, load_config, parse_config
-from gcs.errors import ConfigError
+from quadrotor.errors import ConfigError
 from gcs.metrics import controller_cost, flight_metrics
 from gcs.mission import Mission
 from gcs.sim import SimError, SimOptions, check_run, run_experiment, simulate
-from sitl.errors import VehicleConfigError
+from quadrotor.errors import ConfigError
 from sitl.vehicle_params import VEHICLE_BOUNDS, load_vehicle, parse_vehicle
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -217,7 +217,7 @@ def test_deeply_nested_arrays_are_a_config_error_not_a_traceback(tmp_path):
 def test_deeply_nested_vehicle_file_is_a_vehicle_config_error(tmp_path):
     bad = tmp_path / "deep.toml"
     bad.write_text("[vehicle]\nmass_kg = " + "[" * 600 + "]" * 600 + "\n")
-    with pytest.raises(VehicleConfigError, match="nested too deeply"):
+    with pytest.raises(ConfigError, match="nested too deeply"):
         load_vehicle(bad)
 
 
@@ -289,10 +289,10 @@ def test_every_vehicle_number_rejects_non_finite_and_absurd_values(key, bad):
     if bad == 1e-300 and b.lo <= 1e-300 and not b.integer:
         try:
             parse_vehicle(doc, "v.toml")
-        except VehicleConfigError as exc:
+        except ConfigError as exc:
             assert exc.key.startswith(section), str(exc)
         return
-    with pytest.raises(VehicleConfigError) as info:
+    with pytest.raises(ConfigError) as info:
         parse_vehicle(doc, "v.toml")
     assert info.value.key == key, str(info.value)
     assert "allowed [" in info.value.reason or "positive definite" in info.value.reason, str(info.value)
@@ -303,7 +303,7 @@ def test_vehicle_rates_the_physics_cannot_integrate_are_refused():
         doc = copy.deepcopy(MINIMAL)
         for (section, name), value in changes.items():
             doc.setdefault(section, {})[name] = value
-        with pytest.raises(VehicleConfigError) as info:
+        with pytest.raises(ConfigError) as info:
             parse_vehicle(doc, "v.toml")
         assert info.value.key == key and words in info.value.reason, str(info.value)
 

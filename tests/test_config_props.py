@@ -19,7 +19,7 @@ from pathlib import Path
 from hypothesis import HealthCheck, event, given, settings, strategies as st
 
 from gcs.config import Config, parse_config
-from gcs.errors import ConfigError
+from quadrotor.errors import ConfigError
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 DOCS = [tomllib.loads(p.read_text()) for p in sorted(CONFIGS.glob("*.toml"))]

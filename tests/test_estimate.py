@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 from gcs.estimate import StateEstimator, kalman_gain_cv
-from gcs.model import Command, ModelParams
+from quadrotor.state import Command
+from gcs.model import ModelParams
 
 
 def test_gain_is_a_stable_alpha_beta_pair():

@@ -6,12 +6,13 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.estimate import StateEstimator
-from gcs.flight.clock import ManualClock
+from quadrotor.clock import ManualClock
 from gcs.flight.output import OutputAdapter, OutputModel
 from gcs.flight.stats import LoopStats
 from gcs.flight.telemetry import Telemetry
-from gcs.frames import quaternion_to_euler
-from gcs.model import Command, ModelParams, State
+from quadrotor.frames import quaternion_to_euler
+from quadrotor.state import Command, State
+from gcs.model import ModelParams
 
 MAV = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
 

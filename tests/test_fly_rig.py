@@ -14,9 +14,9 @@ from gcs.config import load_config
 from gcs.flight.rig import RigFlight
 from gcs.link.rig import RigLink, rig_link_budget
 from gcs.log.review import log_metrics
-from sitl.clock import MonotonicClock
+from quadrotor.clock import MonotonicClock
 from sitl.rig import RigServer
-from sitl.rig_protocol import RigFlags, RigState
+from quadrotor.rig_protocol import RigFlags, RigState
 from sitl.transport import PtyTransport
 
 
@@ -96,7 +96,7 @@ def test_sigint_descends_lands_and_disarms(tmp_path):
 @pytest.fixture
 def rig():
     clock = MonotonicClock()
-    server = RigServer(PtyTransport(clock.monotonic_ns), lockstep=True, seed=2, clock=clock)
+    server = RigServer(PtyTransport(clock.now_ns), lockstep=True, seed=2, clock=clock)
     with server:
         yield server
 
@@ -198,7 +198,7 @@ def test_rig_link_budget_and_cli_refusals(tmp_path):
 
 
 def test_hostile_rig_messages_are_rejected_and_counted(rig):
-    from sitl import rig_protocol as rp
+    from quadrotor import rig_protocol as rp
 
     link = RigLink(rig.connection_string)
     flight = RigFlight(_short(), "pd", link, None)

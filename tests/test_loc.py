@@ -6,7 +6,8 @@ from gcs.control import make_controller
 from gcs.control.base import steps_to_go
 from gcs.control.loc import design_loc, finite_horizon_lqr
 from gcs.errors import DesignError
-from gcs.model import State, linear_psi, linear_x_theta, linear_y_phi, linear_z
+from quadrotor.state import State
+from gcs.model import linear_psi, linear_x_theta, linear_y_phi, linear_z
 
 
 def dare_gain(a, b, q, r):

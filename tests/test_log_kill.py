@@ -21,7 +21,7 @@ pytestmark = pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs SI
 WRITER = textwrap.dedent("""
     import sys, time
     from gcs.log import FlightLog
-    from gcs.model import Command, State
+    from quadrotor.state import Command, State
     path, mode = sys.argv[1], sys.argv[2]
     log = FlightLog(path)
     log.metadata("flight", {"controller": "pd"})

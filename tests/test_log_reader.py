@@ -9,7 +9,7 @@ from gcs.errors import LogError
 from gcs.log import FlightLog
 from gcs.log import topics as T
 from gcs.log.reader import MAGIC, read_log
-from gcs.model import Command, State
+from quadrotor.state import Command, State
 
 
 @pytest.fixture(scope="module")

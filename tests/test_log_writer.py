@@ -17,7 +17,7 @@ from gcs.log import FlightLog, check_writable
 from gcs.log import topics as T
 from gcs.log.reader import read_log
 from gcs.log.writer import _Writer
-from gcs.model import Command, State
+from quadrotor.state import Command, State
 
 rng = np.random.default_rng(7)
 STATE = State(*rng.normal(size=12))

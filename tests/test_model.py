@@ -3,9 +3,9 @@ import math
 import numpy as np
 import pytest
 
-from gcs.model import (SUBSYSTEMS, ModelParams, State, continuous_dynamics, euler_step, linear_x_theta,
-                       linear_y_phi, linear_z, subsystem_state, tilt_cos)
-from sitl.reduced import STATE_FIELDS
+from gcs.model import ModelParams, SUBSYSTEMS, continuous_dynamics, euler_step, linear_x_theta, linear_y_phi, linear_z, subsystem_state, tilt_cos
+from quadrotor.state import State
+from quadrotor.state import STATE_FIELDS
 
 
 def test_state_layout_matches_the_plant():

@@ -6,7 +6,8 @@ from hypothesis import given, settings, strategies as st
 
 from gcs.control import make_controller
 from gcs.control.nlsoc import MIRROR, AffineSubsystem, design_nlsoc, lateral_subsystem, one_step_control, z_psi_subsystem
-from gcs.model import ModelParams, State
+from gcs.model import ModelParams
+from quadrotor.state import State
 from gcs.control.nlsoc import _Ctx
 
 TS = 0.01

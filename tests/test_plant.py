@@ -5,15 +5,16 @@ import pytest
 from hypothesis import given, settings, strategies as st
 from scipy.integrate import solve_ivp
 
-from sitl.reduced import PlantState, ReducedParams, hover_thrust_n, step
-from sitl.sensors import Sensors, SensorParams
-from sitl.wind import Wind, WindParams
+from quadrotor.state import State
+from quadrotor.plant import ReducedParams, hover_thrust_n, step
+from quadrotor.sensors import SensorParams, Sensors
+from quadrotor.wind import Wind, WindParams
 
 P = ReducedParams(drag_n_per_m_s=0.0)
 
 
 def airborne(**kw):
-    return PlantState(z=kw.pop("z", 10.0), **kw)
+    return State(z=kw.pop("z", 10.0), **kw)
 
 
 def test_hover_is_an_equilibrium():
@@ -50,17 +51,17 @@ def test_rk4_matches_a_tight_reference_integration_with_tilt_and_drag():
 
 
 def test_stays_on_the_ground_below_hover_thrust_and_lifts_above():
-    s = PlantState()
+    s = State()
     for _ in range(50):
         s = step(s, (0.9 * hover_thrust_n(P), 3.0, 3.0, 3.0), 0.01, P)
-    assert s == PlantState()
+    assert s == State()
     for _ in range(50):
         s = step(s, (1.2 * hover_thrust_n(P), 0, 0, 0), 0.01, P)
     assert s.z > 0.05 and s.vz > 0
 
 
 def test_touchdown_stops_and_levels():
-    s = PlantState(z=0.05, vz=-1.0, vx=1.0, roll=0.1, roll_rate=1.0)
+    s = State(z=0.05, vz=-1.0, vx=1.0, roll=0.1, roll_rate=1.0)
     s = step(s, (0.0, 0, 0, 0), 0.2, P)
     assert s.z == 0.0 and s.vz == 0.0 and s.vx == 0.0 and s.roll == 0.0 and s.roll_rate == 0.0
 
@@ -82,7 +83,7 @@ def test_drag_gives_the_wind_speed_at_steady_state():
 
 def test_bad_step_arguments():
     with pytest.raises(ValueError, match="dt"):
-        step(PlantState(), (0, 0, 0, 0), 0.0, P)
+        step(State(), (0, 0, 0, 0), 0.0, P)
     with pytest.raises(ValueError, match="mass_kg"):
         ReducedParams(mass_kg=-1)
 
@@ -91,7 +92,7 @@ def test_bad_step_arguments():
 @given(st.lists(st.tuples(st.floats(-50, 50), st.floats(-500, 500), st.floats(-500, 500), st.floats(-500, 500)),
                 min_size=1, max_size=40))
 def test_never_below_ground_nor_nan(commands):
-    s = PlantState(z=0.5)
+    s = State(z=0.5)
     for c in commands:
         s = step(s, c, 0.01, ReducedParams())
         assert s.z >= 0.0
@@ -110,7 +111,7 @@ def test_wind_is_seeded_and_has_its_statistics():
 
 def test_sensors_quantise_altitude():
     s = Sensors(SensorParams(altitude="ultrasonic", altitude_resolution_m=0.04), np.random.default_rng(0))
-    m = s.measure(PlantState(z=0.317))
+    m = s.measure(State(z=0.317))
     assert m.z == pytest.approx(0.32)
     assert m[:2] == (0.0, 0.0)
     with pytest.raises(ValueError, match="altitude"):

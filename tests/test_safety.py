@@ -3,7 +3,7 @@ import math
 import pytest
 
 from gcs.flight.safety import EnvelopeLimits, SafetyEnvelope
-from gcs.model import Command, State
+from quadrotor.state import Command, State
 
 LIM = EnvelopeLimits(max_thrust_n=20.0, max_angular_accel_rad_s2=50.0, max_tilt_rad=math.radians(30),
                      fence_half_width_m=10.0, ceiling_m=5.0)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from gcs.errors import ConfigError
+from quadrotor.errors import ConfigError
 
 __all__ = ["CampaignError"]
 

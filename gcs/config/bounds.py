@@ -1,11 +1,11 @@
 """The allowed range of every number of an experiment config, in one table.
 
 :data:`BOUNDS` maps each key (``section.key``; ``mission.phases[].key`` for every
-phase; vectors and matrices element by element) to a :class:`~sitl.vehicle_params.Bound`:
+phase; vectors and matrices element by element) to a :class:`~quadrotor.bounds.Bound`:
 ``[lo, hi]``, the unit and why.  The reader looks every number up here, so a key
 without an entry cannot be read, and every message names the key and the allowed
 range.  Ranges shared with the SITL's vehicle files (mass, gravity, sensor noise)
-are taken from :data:`sitl.vehicle_params.VEHICLE_BOUNDS`, so they are defined once.
+are taken from :mod:`quadrotor.bounds`, so they are defined once.
 
 Besides the table, the loader cross-checks values against each other: a horizon,
 duration and phase of at least one control period, a plant sub-step of at most
@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import re
 
-from sitl.vehicle_params import VEHICLE_BOUNDS, Bound
+from quadrotor import bounds as shared
+from quadrotor.bounds import Bound
 
 __all__ = ["BOUNDS", "bound_for", "WEEK_S", "MAX_RUNS", "MAX_HORIZON_STEPS", "MAX_SUBSTEPS_PER_TICK",
            "MIN_STALE_MESSAGES", "LOC_SUBSYSTEMS", "NLSOC_SUBSYSTEMS", "PD_GAINS", "MATRIX_NAMES"]
@@ -42,7 +43,6 @@ MATRIX_NAMES = ("Q", "R", "H", "Q_printed", "R_printed", "H_printed")
 PD_GAINS = ("kp_z", "kd_z", "kp_psi", "kd_psi", "kp_x", "kd_x", "kp_y", "kd_y", "kp_theta", "kd_theta",
             "kp_phi", "kd_phi")
 
-_V = VEHICLE_BOUNDS
 _PERIOD = Bound(1e-4, WEEK_S, "s", "from the shortest control period, 0.1 ms, to a week")
 _MATRIX = Bound(-1e12, 1e12, "", "a penalty-matrix entry")
 _KP = Bound(0.0, 1e7, "1/s^2", "a proportional PD gain")
@@ -56,11 +56,11 @@ BOUNDS: dict[str, Bound] = {
     "experiment.horizon_s": _PERIOD,
     "experiment.duration_s": _PERIOD,
     "--duration": _PERIOD,
-    "vehicle.mass_kg": _V["vehicle.mass_kg"],
-    "vehicle.gravity_m_s2": _V["vehicle.gravity_m_s2"],
+    "vehicle.mass_kg": shared.MASS_KG,
+    "vehicle.gravity_m_s2": shared.GRAVITY_M_S2,
     "vehicle.max_thrust_n": Bound(0.01, 1e5, "N", "the collective thrust limit"),
     "vehicle.max_angular_accel_rad_s2": Bound(1.0, 1e5, "rad/s^2", "the angular-acceleration limit"),
-    "vehicle.drag_n_per_m_s": _V["drag.linear_n_per_m_s"],
+    "vehicle.drag_n_per_m_s": shared.DRAG_N_PER_M_S,
     "mission.phases[].duration_s": _PERIOD,
     "mission.phases[].z_m": Bound(0.01, 1e4, "m", "an altitude set point below the ceiling"),
     "mission.phases[].radius_m": Bound(0.01, 1e4, "m", "a circle radius"),
@@ -77,11 +77,11 @@ BOUNDS: dict[str, Bound] = {
     "sim.wind.vertical_m_s": Bound(-50.0, 50.0, "m/s", "steady vertical wind, up positive"),
     "sim.wind.gust_std_m_s": _WIND,
     "sim.wind.gust_tau_s": Bound(0.01, 3600.0, "s", "the gust correlation time"),
-    "sim.sensors.altitude_noise_std_m": _V["sensors.baro_noise_std_m"],
-    "sim.sensors.altitude_resolution_m": _V["sensors.baro_resolution_m"],
-    "sim.sensors.position_noise_std_m": _V["sensors.position_noise_std_m"],
-    "sim.sensors.attitude_noise_std_rad": _V["sensors.attitude_noise_std_rad"],
-    "sim.sensors.rate_noise_std_rad_s": _V["sensors.rate_noise_std_rad_s"],
+    "sim.sensors.altitude_noise_std_m": shared.NOISE_M,
+    "sim.sensors.altitude_resolution_m": shared.NOISE_M,
+    "sim.sensors.position_noise_std_m": shared.NOISE_M,
+    "sim.sensors.attitude_noise_std_rad": shared.ATTITUDE_NOISE_RAD,
+    "sim.sensors.rate_noise_std_rad_s": shared.RATE_NOISE_RAD_S,
     "estimator.accel_noise_std_m_s2": Bound(1e-3, 1e3, "m/s^2", "unmodelled acceleration, at most 100 g"),
     "flight.telemetry_rate_hz": Bound(1.0, 1000.0, "Hz", "a MAVLink stream rate"),
     "flight.telemetry_stale_s": Bound(0.003, 60.0, "s", "the telemetry age that triggers the failsafe"),
@@ -89,7 +89,7 @@ BOUNDS: dict[str, Bound] = {
     "flight.fence_half_width_m": Bound(0.1, 1e4, "m", "the geofence box around takeoff"),
     "flight.ceiling_m": Bound(0.1, 1e4, "m", "the altitude ceiling, above the mission"),
     "flight.rate_gain_1_s": Bound(0.1, 1000.0, "1/s", "the autopilot's rate-loop gain"),
-    "flight.inertia_kg_m2": _V["vehicle.inertia_kg_m2"],
+    "flight.inertia_kg_m2": shared.INERTIA_KG_M2,
     "flight.max_torque_nm": _TORQUE,
     "flight.position_std_m": Bound(1e-4, 100.0, "m", "the noise assumed for LOCAL_POSITION_NED"),
     "flight.velocity_std_m_s": Bound(1e-4, 100.0, "m/s", "the noise assumed for LOCAL_POSITION_NED"),

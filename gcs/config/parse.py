@@ -13,11 +13,11 @@ from gcs.config.bounds import (LOC_SUBSYSTEMS, MAX_HORIZON_STEPS, MAX_SUBSTEPS_P
 from gcs.config.reader import Reader, matrix_group
 from gcs.config.sections import (AFTER_HORIZON, MATRIX_MODES, PHASE_KINDS, Config, EstimatorConfig,
                                  ExperimentConfig, FlightConfig, PdGains, PhaseConfig, SimConfig)
-from gcs.errors import ConfigError
-from sitl.reduced import ReducedParams
-from sitl.sensors import ALTITUDE_KINDS, SensorParams
-from sitl.vehicle_params import short_repr
-from sitl.wind import WindParams
+from quadrotor.errors import ConfigError
+from quadrotor.plant import ReducedParams
+from quadrotor.sensors import ALTITUDE_KINDS, SensorParams
+from quadrotor.bounds import short_repr
+from quadrotor.wind import WindParams
 
 __all__ = ["load_config", "parse_config", "resolve_config_path", "bundled_configs"]
 

@@ -10,8 +10,8 @@ import numpy as np
 
 from gcs.config.bounds import bound_for
 from gcs.config.sections import Matrix, MatrixSet
-from gcs.errors import ConfigError
-from sitl.vehicle_params import OutOfBounds, short_repr
+from quadrotor.errors import ConfigError
+from quadrotor.bounds import OutOfBounds, short_repr
 
 __all__ = ["Reader", "matrix_group"]
 

@@ -8,11 +8,11 @@ from typing import Any, Mapping
 import numpy as np
 
 from gcs.config.bounds import BOUNDS
-from gcs.errors import ConfigError
-from sitl.reduced import ReducedParams
-from sitl.sensors import SensorParams
-from sitl.vehicle_params import OutOfBounds, short_repr
-from sitl.wind import WindParams
+from quadrotor.errors import ConfigError
+from quadrotor.plant import ReducedParams
+from quadrotor.sensors import SensorParams
+from quadrotor.bounds import OutOfBounds, short_repr
+from quadrotor.wind import WindParams
 
 __all__ = ["Config", "ExperimentConfig", "MatrixSet", "PhaseConfig", "PdGains", "SimConfig", "EstimatorConfig",
            "FlightConfig", "AFTER_HORIZON", "MATRIX_MODES", "PHASE_KINDS", "Matrix"]

@@ -11,7 +11,7 @@ from gcs.control.base import Controller, FiniteHorizonController, Limits, steps_
 from gcs.control.loc import make_loc
 from gcs.control.nlsoc import make_nlsoc
 from gcs.control.pd import PdController
-from gcs.errors import ConfigError
+from quadrotor.errors import ConfigError
 from gcs.model import ModelParams
 
 __all__ = ["CONTROLLERS", "Controller", "FiniteHorizonController", "Limits", "make_controller",

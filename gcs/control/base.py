@@ -16,7 +16,7 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 from gcs.config import AFTER_HORIZON
-from gcs.model import Command, State
+from quadrotor.state import Command, State
 
 __all__ = ["Controller", "Limits", "FiniteHorizonController", "StagedLaw", "steps_to_go", "horizon_mode", "wrap_angle"]
 

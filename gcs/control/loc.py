@@ -22,7 +22,8 @@ import numpy as np
 from gcs.config import Config
 from gcs.control.base import Controller, FiniteHorizonController, Limits, StagedLaw, wrap_angle
 from gcs.errors import DesignError
-from gcs.model import Command, ModelParams, State, linear_psi, linear_x_theta, linear_y_phi, linear_z, tilt_cos
+from quadrotor.state import Command, State
+from gcs.model import ModelParams, linear_psi, linear_x_theta, linear_y_phi, linear_z, tilt_cos
 
 __all__ = ["finite_horizon_lqr", "LocDesign", "design_loc", "LocLaw", "make_loc"]
 

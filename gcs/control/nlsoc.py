@@ -32,7 +32,8 @@ import numpy as np
 from gcs.config import Config
 from gcs.control.base import Controller, FiniteHorizonController, Limits, StagedLaw, wrap_angle
 from gcs.errors import DesignError
-from gcs.model import Command, ModelParams, State, tilt_cos
+from quadrotor.state import Command, State
+from gcs.model import ModelParams, tilt_cos
 
 __all__ = ["one_step_control", "AffineSubsystem", "NlsocDesign", "design_nlsoc", "NlsocLaw", "make_nlsoc",
            "z_psi_subsystem", "lateral_subsystem", "MIRROR"]

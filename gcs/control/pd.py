@@ -12,7 +12,8 @@ from __future__ import annotations
 
 from gcs.config import PdGains
 from gcs.control.base import Controller, Limits, wrap_angle
-from gcs.model import Command, ModelParams, State, tilt_cos
+from quadrotor.state import Command, State
+from gcs.model import ModelParams, tilt_cos
 
 __all__ = ["PdController"]
 

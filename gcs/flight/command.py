@@ -11,9 +11,10 @@ from pathlib import Path
 
 from gcs.config import load_config
 from gcs.control import CONTROLLERS
-from gcs.flight.clock import MonotonicClock
+from quadrotor.clock import MonotonicClock
 from gcs.flight.embedded import EmbeddedSitl
-from gcs.errors import ConfigError, LogError
+from quadrotor.errors import ConfigError
+from gcs.errors import LogError
 from gcs.flight.fly import EXIT_CODES, Flight, FlightResult, PreflightRefused
 from gcs.flight.loop import Interrupts
 from gcs.flight.recorder import BYTES_PER_FLIGHT_TICK, FlightRecorder, utc_offset_ns

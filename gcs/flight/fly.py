@@ -24,7 +24,7 @@ import numpy as np
 from gcs.config import Config
 from gcs.control import model_params
 from gcs.estimate import StateEstimator
-from gcs.flight.clock import Clock
+from quadrotor.clock import Clock
 from gcs.flight.loop import (EXIT_CODES, FlightLoop, FlightResult, Interrupts, PreflightRefused,  # noqa: F401
                              VehicleClock)
 from gcs.flight.output import OutputAdapter, OutputModel
@@ -33,7 +33,7 @@ from gcs.flight.streams import StreamMonitor
 from gcs.flight.telemetry import Telemetry
 from gcs.link.guard import GuardLimits, OutputGuard, UnsafeCommand
 from gcs.link.mavlink import LinkError, MavlinkLink
-from gcs.model import Command, State
+from quadrotor.state import Command, State
 
 __all__ = ["Flight", "FlightResult", "VehicleClock", "EXIT_CODES", "PreflightRefused"]
 

@@ -70,7 +70,7 @@ from gcs.control import FiniteHorizonController, make_controller, model_params
 from gcs.control.base import horizon_mode
 from gcs.errors import GcsError
 from gcs.estimate import StateEstimator
-from gcs.flight.clock import Clock
+from quadrotor.clock import Clock
 from gcs.flight.recorder import FlightRecorder
 from gcs.log.flightlog import StageCost
 from gcs.flight.safety import EnvelopeLimits, SafetyEnvelope
@@ -79,7 +79,7 @@ from gcs.link.guard import UnsafeCommand
 from gcs.link.mavlink import LinkError
 from gcs.metrics import FlightRecord, controller_cost, flight_metrics
 from gcs.mission import Mission
-from gcs.model import Command, State
+from quadrotor.state import Command, State
 
 __all__ = ["FlightLoop", "FlightResult", "VehicleClock", "Interrupts", "EXIT_CODES", "PreflightRefused"]
 

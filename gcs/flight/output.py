@@ -3,7 +3,7 @@
 The controllers command thrust ``u`` [N] and Euler-angle accelerations
 ``tau`` [rad/s^2] (the paper's model has unit inertia).  First the Euler-angle
 accelerations become FRD body angular accelerations ``alpha_d`` with the exact
-kinematics (:func:`gcs.frames.euler_accel_to_body_accel`; the identity near
+kinematics (:func:`quadrotor.frames.euler_accel_to_body_accel`; the identity near
 hover).  Then, per ``--output``:
 
 ``actuator`` — SET_ACTUATOR_CONTROL_TARGET, group 0::
@@ -42,8 +42,8 @@ import math
 from dataclasses import dataclass
 from typing import Sequence
 
-from gcs.frames import euler_accel_to_body_accel, euler_rates_to_body_rates, euler_to_quaternion
-from gcs.model import Command, State
+from quadrotor.frames import euler_accel_to_body_accel, euler_rates_to_body_rates, euler_to_quaternion, rotation_vector
+from quadrotor.state import Command, State
 
 __all__ = ["OutputModel", "OutputAdapter", "OUTPUTS"]
 
@@ -81,21 +81,6 @@ class OutputModel:
         return 0.0 if v < 0.0 else 1.0 if v > 1.0 else v
 
 
-def _rotation_vector(q_from: Sequence[float], q_to: Sequence[float]) -> tuple[float, float, float]:
-    """Body-frame rotation vector [rad] taking attitude q_from to q_to."""
-    w0, x0, y0, z0 = q_from[0], -q_from[1], -q_from[2], -q_from[3]
-    w1, x1, y1, z1 = q_to
-    w = w0 * w1 - x0 * x1 - y0 * y1 - z0 * z1
-    x = w0 * x1 + x0 * w1 + y0 * z1 - z0 * y1
-    y = w0 * y1 - x0 * z1 + y0 * w1 + z0 * x1
-    z = w0 * z1 + x0 * y1 - y0 * x1 + z0 * w1
-    if w < 0:
-        w, x, y, z = -w, -x, -y, -z
-    s = math.sqrt(x * x + y * y + z * z)
-    k = 2.0 * math.atan2(s, w) / s if s > 1e-12 else 2.0
-    return (k * x, k * y, k * z)
-
-
 class OutputAdapter:
     """Encodes commands for one vehicle as MAVLink messages."""
 
@@ -131,7 +116,7 @@ class OutputAdapter:
                  state.pitch + state.pitch_rate * h + 0.5 * cmd.pitch_accel_rad_s2 * h * h,
                  state.yaw + state.yaw_rate * h + 0.5 * cmd.yaw_accel_rad_s2 * h * h)
         q_t = euler_to_quaternion(*ahead)
-        e = _rotation_vector(q_now, q_t)
+        e = rotation_vector(q_now, q_t)
         ff = [r - k * ei for r, k, ei in zip(rates, m.angle_gain_1_s, e)]
         return {"message": "SET_ATTITUDE_TARGET", "type_mask": 0, "q": list(q_t), "body_rates": ff, "thrust": thrust}
 

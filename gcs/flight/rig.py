@@ -32,16 +32,16 @@ from typing import Callable
 from gcs.config import Config
 from gcs.control import model_params
 from gcs.estimate import StateEstimator
-from gcs.flight.clock import Clock
+from quadrotor.clock import Clock
 from gcs.flight.loop import FlightLoop, FlightResult, Interrupts, PreflightRefused, VehicleClock
 from gcs.flight.recorder import FlightRecorder
 from gcs.flight.validate import TelemetryValidator
 from gcs.link.guard import GuardLimits, OutputGuard
 from gcs.link.mavlink import LinkError
 from gcs.link.rig import RigLink
-from gcs.model import Command, State
-from sitl import rig_protocol as rp
-from sitl.rig_protocol import AckResult, RigFlags, RigState
+from quadrotor.state import Command, State
+from quadrotor import rig_protocol as rp
+from quadrotor.rig_protocol import AckResult, RigFlags, RigState
 
 __all__ = ["RigFlight", "RIG_X_STD_M"]
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from gcs.model import Command, State
+from quadrotor.state import Command, State
 
 __all__ = ["EnvelopeLimits", "SafetyEnvelope", "LIMIT_FLAGS"]
 

@@ -1,6 +1,6 @@
 """Telemetry decoding: MAVLink messages into the estimator (paper frame) and the vehicle status.
 
-Conversions go through :mod:`gcs.frames` only: LOCAL_POSITION_NED becomes
+Conversions go through :mod:`quadrotor.frames` only: LOCAL_POSITION_NED becomes
 (x, y, z up) and (vx, vy, vz up); ATTITUDE's body rates become Euler-angle
 rates.  Freshness is kept per stream on the loop's clock, and the vehicle's
 own time (``time_boot_ms``) is tracked for lockstep.
@@ -17,11 +17,11 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.estimate import StateEstimator
 from gcs.flight.validate import TelemetryValidator
-from gcs.frames import body_rates_to_euler_rates, ned_to_paper_position, ned_to_paper_velocity
+from quadrotor.mavlink.modes import copter_mode_name
+from quadrotor.frames import body_rates_to_euler_rates, ned_to_paper_position, ned_to_paper_velocity
 
 __all__ = ["VehicleStatus", "Telemetry"]
 
-MODE_NAMES = {0: "STABILIZE", 4: "GUIDED", 9: "LAND", 20: "GUIDED_NOGPS", 2: "ALT_HOLD", 5: "LOITER", 6: "RTL"}
 
 
 @dataclass
@@ -38,7 +38,7 @@ class VehicleStatus:
 
     @property
     def mode(self) -> str:
-        return MODE_NAMES.get(self.custom_mode, str(self.custom_mode))
+        return copter_mode_name(self.custom_mode)
 
 
 class Telemetry:

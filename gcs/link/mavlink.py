@@ -37,15 +37,16 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 mavutil.set_dialect("ardupilotmega")
 
-from gcs.errors import ConfigError, GcsError
+from quadrotor.errors import ConfigError
+from gcs.errors import GcsError
 from gcs.link.guard import OutputGuard, UnsafeCommand
 from gcs.link.base import MessageWaiter
-from sitl.signing import SignatureCheck, setup_signing
+from quadrotor.mavlink.framing import parse_bytes, reset_parser
+from quadrotor.mavlink.modes import COPTER_MODES
+from quadrotor.mavlink.signing import SignatureCheck, setup_signing
 
-__all__ = ["LinkError", "MavlinkLink", "LinkCounters", "connection_url", "COPTER_MODES"]
+__all__ = ["LinkError", "MavlinkLink", "LinkCounters", "connection_url"]
 
-#: ArduCopter custom modes used here.
-COPTER_MODES = {"STABILIZE": 0, "GUIDED": 4, "LAND": 9, "GUIDED_NOGPS": 20}
 
 
 class LinkError(GcsError):
@@ -181,14 +182,6 @@ class MavlinkLink(MessageWaiter):
             self.on_frame("in", msg, True)
         return True
 
-    def _parse(self, data: bytes) -> list:
-        """Every message in ``data`` (BAD_DATA included); pymavlink failures on hostile bytes are counted."""
-        try:
-            return self.mav.parse_buffer(data) or []
-        except Exception:  # noqa: BLE001 - pymavlink can raise anything (struct.error, IndexError...) on hostile bytes
-            self.counters.malformed += 1
-            reset_parser(self.mav)
-            return []
 
     def _drain_udp(self, out: list) -> list:
         port = self.conn.port
@@ -208,12 +201,12 @@ class MavlinkLink(MessageWaiter):
                 # pymavlink's udpin answers every address that ever sent: until the vehicle is known.
                 self.conn.clients.add(addr)
                 self.conn.clients_last_alive[addr] = time.time()
-            for msg in self._parse(data):
+            msgs, failed, truncated = parse_bytes(self.mav, data, datagram=True)
+            self.counters.malformed += failed
+            self.counters.truncated += truncated
+            for msg in msgs:
                 if self._accept(msg, addr):
                     out.append(msg)
-            if self.mav.buf_len() > 0:  # a frame cut at the end of the datagram: never joined to the next one
-                self.counters.truncated += 1
-                reset_parser(self.mav)
 
     def drain(self) -> list:
         """Every message waiting now from the target system (never blocks)."""
@@ -401,14 +394,6 @@ def _same_float32(a: float, b: float) -> bool:
         return pack.pack(a) == pack.pack(b)
     except (OverflowError, struct.error):
         return False
-
-
-def reset_parser(mav) -> None:
-    """Drop whatever partial frame a pymavlink parser holds."""
-    mav.buf = bytearray()
-    mav.buf_index = 0
-    mav.expected_length = mavlink.HEADER_LEN_V1 + 2
-    mav.have_prefix_error = False
 
 
 def serial_errors() -> type[Exception]:

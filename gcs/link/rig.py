@@ -1,12 +1,12 @@
-"""Serial link to the 4-DOF rig: XBee API-2 frames of :mod:`sitl.rig_protocol` over pyserial.
+"""Serial link to the 4-DOF rig: XBee API-2 frames of :mod:`quadrotor.rig_protocol` over pyserial.
 
 :class:`RigLink` opens the port (a device such as ``/dev/ttyUSB0``, or any pyserial URL),
-feeds every byte read to an incremental :class:`~sitl.rig_protocol.RigDecoder` (garbled
+feeds every byte read to an incremental :class:`~quadrotor.rig_protocol.RigDecoder` (garbled
 bytes, bad checksums and lengths are counted and skipped, never raised) and encodes
 outgoing messages.  ``on_bytes(direction, data)`` sees the bytes as on the wire both ways
 (the flight log keeps them: replaying the received stream through a decoder gives back
 every message).  The wire format is shared with the emulator (``sitl --rig 4dof``), which is
-why it lives in :mod:`sitl.rig_protocol`.
+why it lives in :mod:`quadrotor.rig_protocol`.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import serial
 from gcs.link.base import MessageWaiter
 from gcs.link.guard import OutputGuard, UnsafeCommand
 from gcs.link.mavlink import LinkError
-from sitl import rig_protocol as rp
+from quadrotor import rig_protocol as rp
 
 __all__ = ["RigLink", "rig_link_budget"]
 

@@ -28,7 +28,7 @@ Items (tuples, first element the kind)::
 
 ``timing`` is :data:`TIMING_FIELDS` in order.  MAVLink frames are decoded by the writer
 with pymavlink (decoded on ``/mavlink/<dir>/<TYPE>``, raw on ``/mavlink/raw``); rig frames
-with :class:`sitl.rig_protocol.RigDecoder` (``/rig/<dir>/<NAME>``, ``/rig/raw``).
+with :class:`quadrotor.rig_protocol.RigDecoder` (``/rig/<dir>/<NAME>``, ``/rig/raw``).
 """
 
 from __future__ import annotations
@@ -149,7 +149,7 @@ class FlightItemWriter:
         """One decoder per direction: the received stream is replayed through it as it came."""
         dec = self._rig.get(direction)
         if dec is None:
-            from sitl import rig_protocol as rp
+            from quadrotor import rig_protocol as rp
 
             dec = self._rig[direction] = rp.RigDecoder(rp.MESSAGE_TYPES.values())
         return dec

@@ -6,7 +6,7 @@
   never raises anything but its documented ``LinkError``; garbled bytes are counted
   (``counters.bad_data``); and, UDP being datagrams, a valid datagram that follows any garbage
   datagram is received (a partial frame must not swallow the next datagram).
-* The rig decoder (``sitl.rig_protocol.RigDecoder``, which ``gcs.link.rig.RigLink`` feeds): on
+* The rig decoder (``quadrotor.rig_protocol.RigDecoder``, which ``gcs.link.rig.RigLink`` feeds): on
   any byte stream, in any chunking, it never raises, and its counts add up: every unescaped
   start delimiter opens exactly one frame, which ends as a message or as exactly one counted
   error (after a final delimiter closes the last one).  ``RigLink`` on pyserial's ``loop://``
@@ -27,7 +27,7 @@ from hypothesis import strategies as st
 os.environ.setdefault("MAVLINK20", "1")
 
 from gcs.link.mavlink import LinkError, MavlinkLink, mavlink  # noqa: E402
-from sitl import rig_protocol as rp  # noqa: E402
+from quadrotor import rig_protocol as rp  # noqa: E402
 
 SETTINGS = settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                                              HealthCheck.function_scoped_fixture])

@@ -7,11 +7,11 @@ import random
 
 import pytest
 
-from sitl import rig_protocol as rp
-from sitl.reduced import PlantState
+from quadrotor import rig_protocol as rp
+from quadrotor.state import State
 from sitl.rig_dynamics import RigParams, mix, step, unmix
 from sitl.rig_firmware import RigFirmware, RigSafetyParams
-from sitl.rig_protocol import AckResult, RigFlags, RigState
+from quadrotor.rig_protocol import AckResult, RigFlags, RigState
 from sitl.rig_sensors import RigSensorParams, RigSensors
 
 P = RigParams()
@@ -63,7 +63,7 @@ def ideal_fw(**kwargs) -> RigFirmware:
 @pytest.mark.parametrize("axis, limit_deg", [("roll", 15.0), ("pitch", 60.0)])
 def test_mechanical_stops_clamp_the_angle_and_zero_the_rate(axis, limit_deg):
     limit = math.radians(limit_deg)
-    s = PlantState(z=50.0)
+    s = State(z=50.0)
     for sign in (1.0, -1.0):
         a = sign * 40.0
         motors, sat = mix(HOVER, a if axis == "roll" else 0.0, a if axis == "pitch" else 0.0, P)
@@ -84,11 +84,11 @@ def test_mechanical_stops_clamp_the_angle_and_zero_the_rate(axis, limit_deg):
         res = step(s, motors, 0.05, P)
         angle = res.state.roll if axis == "roll" else res.state.pitch
         assert abs(angle) < limit and not (res.roll_at_stop or res.pitch_at_stop)
-        s = PlantState(z=50.0)
+        s = State(z=50.0)
 
 
 def test_y_and_yaw_stay_locked_under_roll():
-    s = PlantState(z=50.0, roll=0.2)
+    s = State(z=50.0, roll=0.2)
     motors, _ = mix(HOVER * 1.2, 0.0, 0.0, P)
     for _ in range(100):
         s = step(s, motors, 0.005, P).state
@@ -123,7 +123,7 @@ def test_ultrasonic_quantisation_and_minimum_range():
 
 def test_landed_reads_zero_or_four_centimetres_with_noise():
     sen = RigSensors(RigSensorParams(), random.Random(3))
-    readings = [sen.measure(PlantState()).altitude_m for _ in range(400)]
+    readings = [sen.measure(State()).altitude_m for _ in range(400)]
     assert set(round(r, 3) for r in readings) == {0.0, 0.04}
 
 
@@ -151,7 +151,7 @@ def test_imu_noise_and_determinism_per_seed():
 
 # ---------------------------------------------------------------------------------------------- arming
 def test_arm_only_when_landed():
-    fw = ideal_fw(initial=PlantState(z=0.5))
+    fw = ideal_fw(initial=State(z=0.5))
     p = Pilot(fw)
     assert p.arm() == AckResult.DENIED_NOT_LANDED and fw.state == RigState.DISARMED
     p.ticks(200)                                   # falls and lands

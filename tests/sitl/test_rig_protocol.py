@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sitl import rig_protocol as rp
-from sitl.errors import ProtocolError, SitlError
+from quadrotor import rig_protocol as rp
+from quadrotor.errors import ProtocolError, QuadrotorError
 
 f32 = st.floats(width=32, allow_nan=False)
 u8 = st.integers(0, 0xFF)
@@ -238,7 +238,7 @@ def test_leading_garbage_is_counted_as_discarded():
 def test_encoder_refuses_what_does_not_fit(msg, words):
     with pytest.raises(ProtocolError, match=words.replace("[", r"\[")) as e:
         rp.encode(msg)
-    assert isinstance(e.value, SitlError) and isinstance(e.value, ValueError)
+    assert isinstance(e.value, QuadrotorError) and isinstance(e.value, ValueError)
 
 
 def test_nan_and_inf_are_carried():

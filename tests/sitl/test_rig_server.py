@@ -12,13 +12,13 @@ import time
 import pytest
 import serial
 
-from sitl import rig_protocol as rp
+from quadrotor import rig_protocol as rp
 from sitl.cli import main
-from sitl.clock import MonotonicClock
+from quadrotor.clock import MonotonicClock
 from sitl.errors import UsageError
 from sitl.radio import RadioParams
 from sitl.rig import RigServer
-from sitl.rig_protocol import AckResult, RigFlags, RigState
+from quadrotor.rig_protocol import AckResult, RigFlags, RigState
 from sitl.transport import PtyTransport
 
 HOVER = 9.81
@@ -125,7 +125,7 @@ def rig_factory():
     def make(**kwargs) -> tuple[RigServer, RigClient]:
         clock = MonotonicClock()
         kwargs.setdefault("lockstep", True)
-        rig = RigServer(PtyTransport(clock.monotonic_ns), clock=clock, **kwargs).start()
+        rig = RigServer(PtyTransport(clock.now_ns), clock=clock, **kwargs).start()
         client = RigClient(rig.connection_string)
         made.append((rig, client))
         return rig, client

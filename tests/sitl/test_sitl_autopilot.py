@@ -7,10 +7,10 @@ import math
 import pytest
 
 from sitl.autopilot import Mode
-from sitl.frames import quat_from_euler
+from quadrotor.frames import euler_to_quaternion
 from sitl.simulation import InitialConditions, Simulation
 from sitl.vehicle_params import load_vehicle
-from sitl.wind import WindParams
+from quadrotor.wind import WindParams
 
 V = load_vehicle()
 LEVEL = (1.0, 0.0, 0.0, 0.0)
@@ -143,7 +143,7 @@ def test_thrust_mode_hover_and_climb():
 def test_attitude_and_rate_targets_are_tracked():
     sim = armed_guided()
     run(sim, 2.0, 0.6)
-    q = quat_from_euler(math.radians(15), math.radians(-10), math.radians(30))
+    q = euler_to_quaternion(math.radians(15), math.radians(-10), math.radians(30))
     run(sim, 1.5, 0.5, q=q)
     assert math.degrees(sim.imu.roll) == pytest.approx(15, abs=1.0)
     assert math.degrees(sim.imu.pitch) == pytest.approx(-10, abs=1.0)

@@ -11,7 +11,7 @@ from pymavlink import mavutil
 from sitl_testkit import Gcs
 from sitl.simulation import InitialConditions
 from sitl.transport import PtyTransport, TcpTransport, UdpTransport
-from sitl.wind import WindParams
+from quadrotor.wind import WindParams
 
 M = mavutil.mavlink
 GUIDED_NOGPS, LAND = 20, 9
@@ -305,10 +305,10 @@ def test_tcp_endpoint(make_server, make_gcs):
 
 
 def test_serial_pty_endpoint_with_baud_limit(make_server, make_gcs):
-    from sitl.clock import MonotonicClock
+    from quadrotor.clock import MonotonicClock
     from sitl.radio import RadioParams
     clock = MonotonicClock()
-    srv = make_server(transport=PtyTransport(clock.monotonic_ns), radio=RadioParams(baud=57600), clock=clock)
+    srv = make_server(transport=PtyTransport(clock.now_ns), radio=RadioParams(baud=57600), clock=clock)
     assert srv.connection_string.startswith("/dev/")
     gcs = make_gcs(srv.connection_string, baud=57600)
     gcs.conn.mav.param_request_list_send(1, 1)

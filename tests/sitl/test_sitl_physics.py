@@ -8,7 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sitl import frames, reduced, rigid_body
+from quadrotor import frames
+from quadrotor import plant as reduced
+from sitl import rigid_body
 from sitl.mixer import Mixer
 from sitl.rigid_body import RigidBodyModel, RigidBodyState, initial_state, rotor_wrench
 from sitl.vehicle_params import load_vehicle
@@ -79,7 +81,7 @@ def test_constant_yaw_rate_integrates_exactly_and_quaternion_stays_unit():
     s = airborne()._replace(r=1.0)
     model = RigidBodyModel(V.__class__(**{**V.__dict__, "drag": V.drag.__class__(rotational_n_m_s=0.0)}))
     s = run(s, (HOVER_N,) * 4, 1.5, model=model)
-    _, _, yaw = frames.euler_from_quat(s.qw, s.qx, s.qy, s.qz)
+    _, _, yaw = frames.quaternion_to_euler((s.qw, s.qx, s.qy, s.qz))
     assert yaw == pytest.approx(1.5, abs=1e-9)
     assert frames.quat_norm((s.qw, s.qx, s.qy, s.qz)) == pytest.approx(1.0, abs=1e-12)
 
@@ -103,7 +105,7 @@ def test_ground_contact_landed_takeoff_touchdown():
     s = run(s, (0.0,) * 4, 3.0)
     assert s.on_ground and s.d == 0.0                            # touched down ...
     assert (s.vn, s.ve, s.vd, s.p, s.q, s.r) == (0.0,) * 6       # ... stopped ...
-    roll, pitch, yaw = frames.euler_from_quat(s.qw, s.qx, s.qy, s.qz)
+    roll, pitch, yaw = frames.quaternion_to_euler((s.qw, s.qx, s.qy, s.qz))
     assert roll == pytest.approx(0, abs=1e-12) and pitch == pytest.approx(0, abs=1e-12)  # ... and levelled
 
 
@@ -148,7 +150,7 @@ def test_mixer_keeps_attitude_authority_at_full_and_zero_thrust():
 @given(st.lists(finite, min_size=18, max_size=18), st.lists(st.floats(-5, 20), min_size=4, max_size=4),
        st.lists(st.floats(-20, 20), min_size=3, max_size=3))
 def test_step_is_finite_and_quaternion_unit(vals, cmd, wind):
-    q = frames.quat_from_euler(vals[6] % 3, vals[7] % 1.5, vals[8])
+    q = frames.euler_to_quaternion(vals[6] % 3, vals[7] % 1.5, vals[8])
     s = RigidBodyState(vals[0], vals[1], -abs(vals[2]) - 1, vals[3] / 10, vals[4] / 10, vals[5] / 10, *q,
                        vals[9] / 100, vals[10] / 100, vals[11] / 100, 1.0, 2.0, 3.0, 4.0, False)
     for _ in range(20):
@@ -160,9 +162,9 @@ def test_step_is_finite_and_quaternion_unit(vals, cmd, wind):
 @settings(max_examples=300, deadline=None)
 @given(angle, st.floats(-1.5, 1.5), angle)
 def test_euler_quaternion_round_trip(roll, pitch, yaw):
-    q = frames.quat_from_euler(roll, pitch, yaw)
-    r2, p2, y2 = frames.euler_from_quat(*q)
-    q2 = frames.quat_from_euler(r2, p2, y2)
+    q = frames.euler_to_quaternion(roll, pitch, yaw)
+    r2, p2, y2 = frames.quaternion_to_euler(q)
+    q2 = frames.euler_to_quaternion(r2, p2, y2)
     assert abs(sum(a * b for a, b in zip(q, q2))) == pytest.approx(1.0, abs=1e-9)
 
 

@@ -11,8 +11,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from sitl.endpoint import MavlinkEndpoint
 from sitl.server import SitlServer
-from sitl.signing import (NEW_STREAM_WINDOW, SignatureCheck, SigningStateFile, default_state_path, setup_signing,
-                          wall_clock_timestamp)
+from quadrotor.mavlink.signing import NEW_STREAM_WINDOW, SignatureCheck, SigningStateFile, default_state_path, setup_signing, wall_clock_timestamp
 from sitl.transport import UdpTransport
 
 M = mavlink
@@ -246,7 +245,7 @@ def test_setup_signing_refuses_bad_keys(bad):
 def test_one_check_shared_by_parsers():
     a, b = mavlink.MAVLink(None), mavlink.MAVLink(None)
     check = setup_signing(a, KEY, sign_outgoing=False)
-    from sitl.signing import install_signature_check
+    from quadrotor.mavlink.signing import install_signature_check
     assert install_signature_check(b, check) is check and b.signing is a.signing
     enc = signer()
     frame = arm_frame(enc)

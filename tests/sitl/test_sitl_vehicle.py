@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from sitl import battery as batt
-from sitl.errors import VehicleConfigError
-from sitl.frames import Kinematics
+from quadrotor.errors import ConfigError
+from quadrotor.frames import Kinematics
 from sitl.ned_sensors import NedSensors
 from sitl.params import ParamStore, ardupilot_params
 from sitl.vehicle_params import BatteryParams, bundled_vehicles, load_vehicle, parse_vehicle
@@ -71,17 +71,17 @@ def test_load_by_path(tmp_path):
     (with_("home", "lat_deg", 100.0), "home.lat_deg", "[-90, 90]"),
 ])
 def test_invalid_vehicles_name_the_key(data, key, words):
-    with pytest.raises(VehicleConfigError) as e:
+    with pytest.raises(ConfigError) as e:
         parse_vehicle(data, "x.toml")
     assert e.value.key == key and words in str(e.value) and str(e.value).startswith(f"x.toml: {key}: ")
 
 
 def test_unknown_vehicle_and_bad_toml(tmp_path):
-    with pytest.raises(VehicleConfigError, match="bundled: .*quad-1kg"):
+    with pytest.raises(ConfigError, match="bundled: .*quad-1kg"):
         load_vehicle("no-such-vehicle")
     p = tmp_path / "bad.toml"
     p.write_text("[vehicle\n")
-    with pytest.raises(VehicleConfigError, match="invalid TOML"):
+    with pytest.raises(ConfigError, match="invalid TOML"):
         load_vehicle(p)
 
 

@@ -75,7 +75,7 @@ import struct
 from dataclasses import dataclass, fields
 from typing import ClassVar, Iterable, Union
 
-from sitl.errors import ProtocolError
+from quadrotor.errors import ProtocolError
 
 __all__ = [
     "START", "ESCAPE", "XOR", "SPECIAL_BYTES", "MAX_FRAME_DATA", "PROTOCOL_VERSION", "PWM_MAX",

@@ -1,20 +1,10 @@
 """Reduced quadrotor plant of the paper (eq. 1), z up, as a pure step function.
 
-The plant is the "truth" of the in-process simulation and of the reduced-model
-option of the networked SITL.  It never imports a link and never imports
-``gcs``: the state layout below is the contract with the ground station
-(``gcs.model.State`` has the same field order; a test checks it).
+The plant is the "truth" of the in-process simulation (``gcs sim``) and of the
+reduced-model option of the networked SITL; it never imports a link.
 
-Dynamics (paper frame, z up, SI units)::
-
-    m x'' = -u sin(theta)                + d_x
-    m y'' =  u cos(theta) sin(phi)       + d_y
-    m z'' =  u cos(theta) cos(phi) - m g + d_z
-    phi'' = tau_phi,  theta'' = tau_theta,  psi'' = tau_psi
-
-where ``u`` is the collective thrust [N], ``tau_*`` are angular accelerations
-[rad/s^2] (the model has unit inertia) and ``d = c_drag (w - v)`` is the force
-of the air on the body moving at velocity ``v`` in a wind ``w`` [m/s].
+Dynamics: eq. 1 (:func:`quadrotor.dynamics.eq1_acceleration`) plus the force of the air
+``d = c_drag (w - v)`` on the body moving at velocity ``v`` in a wind ``w`` [m/s].
 
 Integration: the inputs are held (zero-order hold) over one call of
 :func:`step`, which is split into sub-steps of at most ``max_substep_s``
@@ -33,33 +23,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple, Sequence
+from typing import Sequence
 
-__all__ = ["PlantState", "ReducedParams", "step", "hover_thrust_n", "STATE_FIELDS"]
+from quadrotor.dynamics import eq1_acceleration
+from quadrotor.state import State
 
-
-class PlantState(NamedTuple):
-    """True state of the reduced plant (paper frame, z up).
-
-    Positions [m], velocities [m/s], Euler angles [rad] (roll, pitch, yaw as
-    in MAVLink ATTITUDE), Euler-angle rates [rad/s].
-    """
-
-    x: float = 0.0
-    y: float = 0.0
-    z: float = 0.0
-    vx: float = 0.0
-    vy: float = 0.0
-    vz: float = 0.0
-    roll: float = 0.0
-    pitch: float = 0.0
-    yaw: float = 0.0
-    roll_rate: float = 0.0
-    pitch_rate: float = 0.0
-    yaw_rate: float = 0.0
-
-
-STATE_FIELDS = PlantState._fields
+__all__ = ["ReducedParams", "step", "hover_thrust_n"]
 
 
 @dataclass(frozen=True)
@@ -112,13 +81,13 @@ def step(
     dt: float,
     params: ReducedParams,
     wind_m_s: Sequence[float] = (0.0, 0.0, 0.0),
-) -> PlantState:
+) -> State:
     """Advance the plant by ``dt`` seconds with the command held constant.
 
     Parameters
     ----------
     state : sequence of 12 floats
-        Current state in :data:`STATE_FIELDS` order.
+        Current state in :class:`~quadrotor.state.State` order.
     command : sequence of 4 floats
         ``(thrust_n, tau_roll_rad_s2, tau_pitch_rad_s2, tau_yaw_rad_s2)``;
         saturated as described in :class:`ReducedParams`.
@@ -130,7 +99,7 @@ def step(
 
     Returns
     -------
-    PlantState
+    State
     """
     if not dt > 0:
         raise ValueError(f"dt must be > 0, got {dt!r}")
@@ -169,21 +138,12 @@ def step(
         th_e = th + q * h + 0.5 * tt * h * h
         psi_e = psi + r * h + 0.5 * tr * h * h
 
-        s_th, c_th = math.sin(th), math.cos(th)
-        s_ph, c_ph = math.sin(phi), math.cos(phi)
-        ax0 = -um * s_th + cwx
-        ay0 = um * c_th * s_ph + cwy
-        az0 = um * c_th * c_ph - g + cwz
-        s_th, c_th = math.sin(th_m), math.cos(th_m)
-        s_ph, c_ph = math.sin(phi_m), math.cos(phi_m)
-        axm = -um * s_th + cwx
-        aym = um * c_th * s_ph + cwy
-        azm = um * c_th * c_ph - g + cwz
-        s_th, c_th = math.sin(th_e), math.cos(th_e)
-        s_ph, c_ph = math.sin(phi_e), math.cos(phi_e)
-        axe = -um * s_th + cwx
-        aye = um * c_th * s_ph + cwy
-        aze = um * c_th * c_ph - g + cwz
+        ax0, ay0, az0 = eq1_acceleration(um, phi, th, g)
+        axm, aym, azm = eq1_acceleration(um, phi_m, th_m, g)
+        axe, aye, aze = eq1_acceleration(um, phi_e, th_e, g)
+        ax0, ay0, az0 = ax0 + cwx, ay0 + cwy, az0 + cwz
+        axm, aym, azm = axm + cwx, aym + cwy, azm + cwz
+        axe, aye, aze = axe + cwx, aye + cwy, aze + cwz
 
         # Translational RK4; acceleration = a_att(t) - c v.
         k1x, k1y, k1z = ax0 - c * vx, ay0 - c * vy, az0 - c * vz
@@ -210,4 +170,4 @@ def step(
             z = vx = vy = vz = 0.0
             phi = th = p = q = r = 0.0
 
-    return PlantState(x, y, z, vx, vy, vz, phi, th, psi, p, q, r)
+    return State(x, y, z, vx, vy, vz, phi, th, psi, p, q, r)

@@ -30,7 +30,7 @@ loaded at start so that frames captured before a restart are refused.
 
 Usage (either side)::
 
-    from sitl.signing import setup_signing
+    from quadrotor.mavlink.signing import setup_signing
     check = setup_signing(conn.mav, key, link_id=0)    # conn = mavutil.mavlink_connection(...)
     ...
     check.bad_signature, check.replayed, check.stale_timestamp

@@ -82,7 +82,7 @@ class Sensors:
                              + [p.attitude_noise_std_rad] * 3 + [p.rate_noise_std_rad_s] * 3)
 
     def measure(self, state: Sequence[float]) -> Measurement:
-        """Readings for a plant state in ``sitl.reduced.STATE_FIELDS`` order."""
+        """Readings for a plant state in ``quadrotor.state.STATE_FIELDS`` order."""
         noise = (self._rng.standard_normal(9) * self._std).tolist()
         z = state[2] + noise[2]
         res = self.params.altitude_resolution_m

@@ -1,0 +1,1 @@
+"""MAVLink pieces both sides need: signing, framing of datagrams and streams, ArduCopter's modes."""
