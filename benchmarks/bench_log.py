@@ -10,7 +10,7 @@ stderr, one JSON document on stdout, see ``benchlib.py``).  Prints
   target <= 50 us for the 6-message tick;
 * the simulation speed without a log, with the log written in-process and with the
   background writer process (what ``gcs sim`` uses), in simulated seconds per wall second;
-* what ``gcs fly`` pays per control tick to log it (:class:`gcs.flight.recorder.FlightRecorder`
+* what ``gcs fly`` pays per control tick to log it (:class:`gcs.log.recorder.FlightRecorder`
   into the writer process, real pymavlink frames: ATTITUDE and LOCAL_POSITION_NED in,
   SET_ATTITUDE_TARGET out, plus the tick): median us back to back and paced at 100 Hz (a
   sleep between ticks, as in flight; on this VM cold caches after a sleep slow every piece of
@@ -39,7 +39,8 @@ from gcs.control import make_controller
 from gcs.log import FlightLog
 from gcs.log.meta import write_run_header
 from gcs.log.review import log_metrics
-from gcs.log.simlog import BackgroundSimLog
+from gcs.log.records import LoopTiming
+from gcs.log.sink import BackgroundSink
 from quadrotor.state import Command, State
 from gcs.sim import SimOptions, simulate
 
@@ -118,7 +119,7 @@ def bench_sim(config, duration_s: float, repeats: int, mode: str, tmp: Path) -> 
             with FlightLog(path) as log:
                 simulate(config, "nlsoc", run=r, options=SimOptions(duration_s=duration_s), designed=designed, log=log)
         else:
-            with BackgroundSimLog(path) as log:
+            with BackgroundSink(path, overflow="wait") as log:
                 simulate(config, "nlsoc", run=r, options=SimOptions(duration_s=duration_s), designed=designed, log=log)
         ratios.append(duration_s / (time.perf_counter() - t0))
     return statistics.median(ratios)
@@ -134,7 +135,7 @@ def bench_sim_runs(config, duration_s: float, runs: int, tmp: Path) -> tuple[flo
     run_experiment(config, ctls, runs=runs, options=opts)
     plain = time.perf_counter() - t0
     t0 = time.perf_counter()
-    with BackgroundSimLog(tmp / "runs.mcap") as log:
+    with BackgroundSink(tmp / "runs.mcap", overflow="wait") as log:
         run_experiment(config, ctls, runs=runs, options=opts, log=log)
     logged = time.perf_counter() - t0
     return plain, logged
@@ -160,22 +161,22 @@ def _fly_tick(rec, k: int, frames, state, ref, cmd) -> None:
     rec.mavlink(t, "in", att)
     rec.mavlink(t, "in", pos)
     rec.mavlink(t, "out", sat)
-    rec.tick(t, k, state, ref, cmd, cmd, max(0, 60000 - k), "horizon", (1e-5, 3e-4, False, 1e-4, 1e-5, 2e-5, 1e-4, 3e-5))
+    rec.tick(t, k, state, ref, cmd, cmd, max(0, 60000 - k), "horizon",
+             LoopTiming(1e-5, 3e-4, False, 1e-4, 1e-5, 2e-5, 1e-4, 3e-5))
 
 
 def bench_fly_tick(tmp: Path, ticks: int, paced_ticks: int) -> dict:
     """Median and p99 us of what gcs fly's loop pays to log one tick, and the paced baseline."""
     from gcs.config import load_config as _load
     from gcs.estimate import StateEstimator
-    from gcs.flight.recorder import FlightRecorder
-    from gcs.log.flightlog import BackgroundFlightLog
+    from gcs.log.recorder import FlightRecorder
     from gcs.model import ModelParams
 
     frames = _mavlink_frames()
     states, refs, cmds = _inputs(1000, seed=2)
     out = {}
     for label, n, pause in (("back_to_back", ticks, 0.0), ("paced_100hz", paced_ticks, 0.0097)):
-        rec = FlightRecorder(BackgroundFlightLog(tmp / f"fly_{label}.mcap"))
+        rec = FlightRecorder(BackgroundSink(tmp / f"fly_{label}.mcap"))
         rec.flight_start(0, controller="nlsoc", experiment="x", ts_s=0.01, steps=n, cost=None)
         samples = []
         for k in range(n):
@@ -210,18 +211,17 @@ def bench_fly_tick(tmp: Path, ticks: int, paced_ticks: int) -> dict:
 def make_flight_log(path: Path, config, minutes: float) -> int:
     """A gcs fly log of ``minutes`` at 100 Hz as the flight loop writes it (recorder -> writer process):
     per tick the control topics, timing and three MAVLink frames decoded and raw."""
-    from gcs.flight.recorder import FlightRecorder
-    from gcs.log.flightlog import BackgroundFlightLog, StageCost
     from gcs.log.meta import run_attachments, run_metadata
+    from gcs.log.recorder import FlightRecorder
     from gcs.metrics import controller_cost
 
     n = int(minutes * 60 * 100)
     states, refs, cmds = _inputs(1000, seed=1)
     frames = _mavlink_frames()
-    rec = FlightRecorder(BackgroundFlightLog(path))
+    rec = FlightRecorder(BackgroundSink(path))
     rec.header(run_metadata(config, ["loc"], source="flight"), run_attachments(config, {}))
     rec.flight_start(0, controller="loc", experiment=config.experiment.name, ts_s=0.01, steps=n,
-                     cost=StageCost.spec_of(controller_cost("loc", config), 1.0, 9.81))
+                     cost=controller_cost("loc", config).to_dict(1.0, 9.81))
     for k in range(n):
         i = k % 1000
         _fly_tick(rec, k, frames, states[i], refs[i], cmds[i])

@@ -36,10 +36,10 @@ import serial
 from benchlib import document, emit, row
 from quadrotor import rig_protocol as rp
 from quadrotor.clock import MonotonicClock
-from sitl.radio import RadioParams
-from sitl.rig import RigServer
-from sitl.rig_firmware import RigFirmware
-from sitl.transport import PtyTransport
+from sitl.net.pty import PtyTransport
+from sitl.net.radio import RadioParams
+from sitl.rig.firmware import RigFirmware
+from sitl.rig.server import RigServer
 
 BAUD = 115200
 

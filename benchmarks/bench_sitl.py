@@ -39,11 +39,11 @@ from pymavlink import mavutil
 
 from benchlib import document, emit, row
 
-from sitl import rigid_body
-from sitl.server import SitlServer
-from sitl.simulation import Simulation
-from sitl.transport import UdpTransport
-from sitl.vehicle_params import load_vehicle
+from sitl.copter import rigid_body
+from sitl.copter.server import SitlServer
+from sitl.copter.simulation import Simulation
+from sitl.copter.vehicle_file import load_vehicle
+from sitl.net.udp import UdpTransport
 
 
 def bench_physics(sim_seconds: float) -> float:

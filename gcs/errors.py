@@ -7,7 +7,7 @@ prints its message and exits with its ``exit_code`` without a traceback.  :class
 
 from quadrotor.errors import ConfigError, QuadrotorError
 
-__all__ = ["GcsError", "ConfigError", "DesignError", "LogError"]
+__all__ = ["GcsError", "ConfigError", "DesignError", "LogError", "PreflightRefused"]
 
 
 class GcsError(QuadrotorError):
@@ -23,3 +23,9 @@ class DesignError(GcsError, ValueError):
 class LogError(GcsError):
     """A flight log cannot be written or read: unwritable directory, full disk,
     missing file, not an MCAP log, or an MCAP log without what a tool needs."""
+
+
+class PreflightRefused(GcsError):
+    """A preflight check failed; the vehicle was not armed (or was disarmed again on the ground)."""
+
+    exit_code = 7

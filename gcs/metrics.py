@@ -6,7 +6,9 @@ Per flight (``K`` control steps, ``k = 0 .. K-1``; the record holds K + 1 states
     The controller's own quadratic cost, eq. 5 (LOC: state [e_z, e_vz], input u1 of
     the exact linearisation) or eq. 17 (NLSOC: state [e_z, e_vz, e_yaw, e_yaw_rate],
     input [thrust deviation from hover (or thrust, for nlsoc-literal), tau_psi]),
-    ``J = 1/2 sum_{k<M} (x'Qx + u'Ru) + 1/2 x(M)' H x(M)`` with M = min(N, K).
+    ``J = 1/2 sum_{k<M} (x'Qx + u'Ru) + 1/2 x(M)' H x(M)`` with M = min(N, K)
+    (:func:`gcs.control.cost.flight_cost`; :class:`CostSpec` and :func:`controller_cost`
+    live there too and are re-exported here).
     Not defined for PD (the paper prints "-"): the key is absent.
 ``J_u``
     ``sum |u(k)|`` of the thrust [N] (the issue's definition; includes the hover thrust).
@@ -33,19 +35,20 @@ Figures are in SI units (the paper's tables appear to use centimetres for J_e).
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from typing import Iterable, Mapping
 
 import numpy as np
 
 from gcs.config import Config
+from gcs.control.cost import CostSpec, controller_cost, flight_cost
 from gcs.mission import Mission
-from gcs.model import MIN_TILT_COS, SUBSYSTEMS
 
 __all__ = ["FlightRecord", "CostSpec", "controller_cost", "flight_metrics", "summarize", "METRICS", "AXIS_INDEX"]
 
 #: Metric keys in table order.
-METRICS = ("J", "J_u", "J_u_hover", "J_u_all", "J_e", "J_e_setpoint", "steady_state_error_m", "overshoot_m", "rms_error_m")
+METRICS = ("J", "J_u", "J_u_hover", "J_u_all", "J_e", "J_e_setpoint", "steady_state_error_m", "overshoot_m",
+           "rms_error_m")
 
 AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
 
@@ -81,54 +84,8 @@ class FlightRecord:
         return self.command.shape[0] * self.ts_s
 
 
-@dataclass(frozen=True)
-class CostSpec:
-    """What J of a controller weighs: eq. 5 (``"loc"``) or eq. 17 (``"nlsoc"``)."""
-
-    kind: str
-    Q: np.ndarray
-    R: np.ndarray
-    H: np.ndarray
-    horizon_steps: int
-    gravity_compensated: bool = True
-
-
-def controller_cost(name: str, config: Config) -> CostSpec | None:
-    """The cost J of controller ``name`` (None for PD)."""
-    e = config.experiment
-    if name == "loc":
-        q, r, h = config.loc["z"].resolved(e.matrices)
-        return CostSpec("loc", q, r, h, e.horizon_steps)
-    if name in ("nlsoc", "nlsoc-literal"):
-        q, r, h = config.nlsoc["z_psi"].resolved(e.matrices)
-        return CostSpec("nlsoc", q, r, h, e.horizon_steps, gravity_compensated=(name == "nlsoc"))
-    return None
-
-
-def _quadratic_cost(rec: FlightRecord, cost: CostSpec, mass_kg: float, g: float) -> float:
-    k = rec.command.shape[0]
-    m_steps = min(cost.horizon_steps, k)
-    s, r = rec.state, rec.ref
-    cc = np.maximum(np.cos(s[:, 6]) * np.cos(s[:, 7]), MIN_TILT_COS)
-    if cost.kind == "loc":
-        idx = list(SUBSYSTEMS["z"])
-        x = s[:, idx] - r[:, idx]
-        u = (rec.command[:, 0] * cc[:-1] / mass_kg - g)[:, None]
-    else:
-        idx = list(SUBSYSTEMS["z_psi"])
-        x = s[:, idx] - r[:, idx]
-        x[:, 2] = (x[:, 2] + np.pi) % (2 * np.pi) - np.pi  # as gcs.control.base.wrap_angle
-        thrust = rec.command[:, 0] - (mass_kg * g / cc[:-1] if cost.gravity_compensated else 0.0)
-        u = np.column_stack([thrust, rec.command[:, 3]])
-    xs, us = x[:m_steps], u[:m_steps]
-    stage = np.einsum("ki,ij,kj->", xs, cost.Q, xs) + np.einsum("ki,ij,kj->", us, cost.R, us)
-    xf = x[m_steps]
-    return float(0.5 * stage + 0.5 * xf @ cost.H @ xf)
-
-
 def _window(t: np.ndarray, lo: float, hi: float) -> np.ndarray:
-    mask = (t >= lo - 1e-9) & (t < hi - 1e-9)
-    return mask
+    return (t >= lo - 1e-9) & (t < hi - 1e-9)
 
 
 def _window_or_last(t: np.ndarray, lo: float, hi: float) -> np.ndarray:
@@ -165,7 +122,7 @@ def flight_metrics(rec: FlightRecord, config: Config, mission: Mission, cost: Co
     z_sp = mission.setpoint_z_m
     out: dict[str, float] = {}
     if cost is not None:
-        out["J"] = _quadratic_cost(rec, cost, mass, g)
+        out["J"] = flight_cost(rec.state, rec.ref, rec.command, cost, mass, g)
     out["J_u"] = float(np.abs(u[:, 0]).sum())
     out["J_u_hover"] = float(np.abs(u[:, 0] - mass * g).sum())
     out["J_u_all"] = float(np.abs(u).sum())

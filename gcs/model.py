@@ -1,7 +1,22 @@
-"""The controllers' models of the quadrotor: eq. 1 discretised, and the paper's subsystem splits.
+"""The controllers' models of the quadrotor: eq. 1 discretised, and the paper's subsystem models.
 
 Eq. 1 itself is :mod:`quadrotor.dynamics` (shared with the plant); here are its Euler
-discretisation and the linear subsystem models the designs use.
+discretisation and every subsystem model a design or a law uses, each written once:
+
+=========  =====================================  ===========================================
+eq.        model                                   here
+=========  =====================================  ===========================================
+2          Euler step of eq. 1                    :func:`euler_step`
+4          z after the exact linearisation eq. 3  :func:`linear_z` (and yaw: :func:`linear_psi`)
+8          small-angle y-phi (erratum 2)          :func:`linear_y_phi`, :func:`linear_x_theta`
+16         NLSOC z-psi, affine in the input       :class:`ZPsiModel` (matrices at theta = phi = 0:
+                                                  :func:`z_psi_affine_model`)
+20         NLSOC y-phi with the applied thrust    :class:`YPhiModel`, :class:`XThetaModel`
+=========  =====================================  ===========================================
+
+The eq. 16 / eq. 20 models are ``x(k+1) = f0(x, ctx) + f1(x, ctx) u`` (eq. 9), in plain Python
+(lists) because the NLSOC law evaluates them at every control step; ``ctx`` is an
+:class:`AffineContext` (the attitude and the thrust applied this step).
 
 Subsystems (the paper's splits), as index tuples into :class:`State`:
 
@@ -15,11 +30,12 @@ Subsystems (the paper's splits), as index tuples into :class:`State`:
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
+from gcs.errors import DesignError
 from quadrotor.dynamics import eq1_acceleration
 from quadrotor.state import Command, State
 
@@ -27,6 +43,7 @@ __all__ = [
     "State", "Command", "ModelParams", "SUBSYSTEMS",
     "continuous_dynamics", "euler_step", "subsystem_state",
     "linear_z", "linear_psi", "linear_y_phi", "linear_x_theta", "MIN_TILT_COS", "tilt_cos",
+    "AffineContext", "ZPsiModel", "YPhiModel", "XThetaModel", "z_psi_affine_model",
 ]
 
 #: Smallest cos(theta) cos(phi) used when dividing by it (|tilt| about 78 deg).
@@ -91,7 +108,7 @@ def continuous_dynamics(state: Sequence[float], command: Sequence[float], params
 
 
 def euler_step(state: Sequence[float], command: Sequence[float], ts: float, params: ModelParams) -> np.ndarray:
-    """One step of the Euler discretisation ``x(k+1) = x(k) + Ts f(x(k), u(k))``."""
+    """One step of the Euler discretisation ``x(k+1) = x(k) + Ts f(x(k), u(k))`` (eq. 2 for z)."""
     if not ts > 0:
         raise ValueError(f"ts must be > 0, got {ts!r}")
     s = np.asarray(state, dtype=float)
@@ -114,12 +131,15 @@ def _double_integrator(ts: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def linear_z(ts: float) -> tuple[np.ndarray, np.ndarray]:
-    """A, B of the exactly linearised z subsystem (eq. 4); input u1 [m/s^2]."""
+    """Eq. 4: A, B of the z subsystem after the exact linearisation eq. 3, state [z, vz].
+
+    ``A = [[1, T], [0, 1]]`` (shape (2, 2)), ``B = [0, T]'`` (shape (2, 1)); input u1 [m/s^2].
+    """
     return _double_integrator(ts)
 
 
 def linear_psi(ts: float) -> tuple[np.ndarray, np.ndarray]:
-    """A, B of the yaw subsystem; input tau_psi [rad/s^2]."""
+    """A, B of the yaw subsystem (section 2.2: eq. 4's matrices), state [yaw, yaw_rate]; input tau_psi [rad/s^2]."""
     return _double_integrator(ts)
 
 
@@ -135,10 +155,160 @@ def _lateral(ts: float, sign: float, g: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def linear_y_phi(ts: float, gravity_m_s2: float = 9.81) -> tuple[np.ndarray, np.ndarray]:
-    """A, B of the small-angle y-phi subsystem (eq. 8, corrected A(4,4) = 1)."""
+    """Eq. 8: A (4, 4), B (4, 1) of the small-angle y-phi subsystem, state [y, vy, roll, roll_rate].
+
+    ``A(2,3) = g T``; A(4,4) = 1 (erratum 2: printed T).  Input tau_phi [rad/s^2].
+    """
     return _lateral(ts, +1.0, gravity_m_s2)
 
 
 def linear_x_theta(ts: float, gravity_m_s2: float = 9.81) -> tuple[np.ndarray, np.ndarray]:
-    """A, B of the small-angle x-theta subsystem: as y-phi with A(2,3) = -g T (m x'' = -u sin theta)."""
+    """Eq. 8's x-theta twin (not printed, erratum 2): as y-phi with A(2,3) = -g T (m x'' = -u sin theta)."""
     return _lateral(ts, -1.0, gravity_m_s2)
+
+
+# --------------------------------------------------------------------------- NLSOC's affine models
+
+@dataclass
+class AffineContext:
+    """What the eq. 16 / eq. 20 models need beyond their own state, at one control step.
+
+    Attributes
+    ----------
+    cos_roll, sin_roll, cos_pitch, sin_pitch : float
+        Of the attitude estimate [rad] (not floored).
+    thrust_n : float
+        The thrust applied this step [N] (eq. 20's ``u_z*``; set after the z-psi law).
+    """
+
+    cos_roll: float = 1.0
+    sin_roll: float = 0.0
+    cos_pitch: float = 1.0
+    sin_pitch: float = 0.0
+    thrust_n: float = 0.0
+
+    def set_attitude(self, roll: float, pitch: float) -> None:
+        """Cosines and sines of ``roll`` and ``pitch`` [rad]."""
+        self.cos_roll, self.sin_roll = math.cos(roll), math.sin(roll)
+        self.cos_pitch, self.sin_pitch = math.cos(pitch), math.sin(pitch)
+
+
+def _check_positive(**values: float) -> None:
+    for name, v in values.items():
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise DesignError(f"{name} must be a finite number > 0, got {v!r}")
+
+
+class ZPsiModel:
+    """Eq. 16: the NLSOC z-psi subsystem ``x(k+1) = f0(x) + f1(theta, phi) u``.
+
+    State ``x = [z, vz, yaw, yaw_rate]`` (or their errors from a reference), input
+    ``u = [thrust [N], tau_psi [rad/s^2]]``::
+
+        f0(x) = [z + Ts vz, vz - g Ts, yaw + Ts yaw_rate, yaw_rate]
+        f1    = [[0, 0], [Ts cos(theta) cos(phi) / m, 0], [0, 0], [0, Ts]]
+
+    With ``gravity_in_f0=False`` the ``-g Ts`` term is dropped: the input is then the thrust
+    beyond what holds the vehicle up (erratum 8).
+
+    Parameters
+    ----------
+    ts_s : float
+        Sampling period Ts [s].
+    mass_kg, gravity_m_s2 : float
+    gravity_in_f0 : bool
+    """
+
+    n, m = 4, 2
+    __slots__ = ("_gts", "_ts_m", "gravity_in_f0", "gravity_m_s2", "mass_kg", "ts_s")
+
+    def __init__(self, ts_s: float, mass_kg: float, gravity_m_s2: float, *, gravity_in_f0: bool = True) -> None:
+        self.ts_s, self.mass_kg, self.gravity_m_s2 = ts_s, mass_kg, gravity_m_s2
+        self.gravity_in_f0 = gravity_in_f0
+        self._gts = gravity_m_s2 * ts_s if gravity_in_f0 else 0.0
+        self._ts_m = ts_s / mass_kg
+
+    def f0(self, x: Sequence[float], ctx: AffineContext | None = None) -> list[float]:
+        """Drift f0(x), 4 floats."""
+        ts = self.ts_s
+        return [x[0] + ts * x[1], x[1] - self._gts, x[2] + ts * x[3], x[3]]
+
+    def f1(self, x: Sequence[float] | None, ctx: AffineContext) -> list[list[float]]:
+        """Input matrix f1(theta, phi), 4 rows of 2 (depends on the attitude only)."""
+        return [[0.0, 0.0], [self._ts_m * ctx.cos_pitch * ctx.cos_roll, 0.0], [0.0, 0.0], [0.0, self.ts_s]]
+
+
+def z_psi_affine_model(ts: float, mass_kg: float, gravity_m_s2: float, *,
+                       gravity_compensated: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Eq. 16 at theta = phi = 0 as matrices: ``s(k+1) = A s(k) + B v(k) + d``, s = [z, vz, yaw, yaw_rate].
+
+    Evaluated from :class:`ZPsiModel` (f0 is affine in x: ``A e_i = f0(e_i)`` without gravity,
+    ``d = f0(0)``), so the matrices and the flying model cannot disagree.
+
+    Parameters
+    ----------
+    ts : float
+        Sampling period [s].
+    mass_kg, gravity_m_s2 : float
+    gravity_compensated : bool
+        True: ``v = [thrust - m g, tau_psi]`` and ``d = 0``.  False (literal):
+        ``v = [thrust, tau_psi]`` and ``d = [0, -g Ts, 0, 0]``.
+
+    Returns
+    -------
+    A : ndarray, shape (4, 4)
+    B : ndarray, shape (4, 2)
+        Units: [m/s per N] in row 2 (Ts / m), [rad/s per rad/s^2] in row 4 (Ts).
+    d : ndarray, shape (4,)
+
+    Raises
+    ------
+    gcs.errors.DesignError
+        A non-positive or non-finite ``ts``, ``mass_kg`` or ``gravity_m_s2``.
+    """
+    _check_positive(ts=ts, mass_kg=mass_kg, gravity_m_s2=gravity_m_s2)
+    linear = ZPsiModel(ts, mass_kg, gravity_m_s2, gravity_in_f0=False)
+    a = np.array([linear.f0(e) for e in np.eye(4).tolist()]).T
+    d = np.array(ZPsiModel(ts, mass_kg, gravity_m_s2, gravity_in_f0=not gravity_compensated).f0([0.0] * 4))
+    return a, np.array(linear.f1(None, AffineContext())), d
+
+
+class _LateralModel:
+    """Eq. 20 and its x-theta twin: state ``[pos, vel, angle, rate]``, input tau [rad/s^2]."""
+
+    n, m = 4, 1
+    __slots__ = ("_f1", "_ts_m", "mass_kg", "ts_s")
+
+    def __init__(self, ts_s: float, mass_kg: float) -> None:
+        self.ts_s, self.mass_kg = ts_s, mass_kg
+        self._ts_m = ts_s / mass_kg
+        self._f1 = ((0.0,), (0.0,), (0.0,), (ts_s,))
+
+    def f1(self, x: Sequence[float] | None = None, ctx: AffineContext | None = None) -> tuple:
+        """Input matrix ``f1 = [0, 0, 0, Ts]'``, 4 rows of 1 (constant)."""
+        return self._f1
+
+
+class YPhiModel(_LateralModel):
+    """Eq. 20: ``f0 = [y + Ts vy, vy + Ts u cos(theta) sin(phi) / m, phi + Ts phi_rate, phi_rate]``,
+    u the thrust applied this step (``ctx.thrust_n``)."""
+
+    __slots__ = ()
+
+    def f0(self, x: Sequence[float], ctx: AffineContext) -> list[float]:
+        """Drift f0(x, u), 4 floats."""
+        ts = self.ts_s
+        return [x[0] + ts * x[1], x[1] + self._ts_m * ctx.thrust_n * ctx.cos_pitch * ctx.sin_roll,
+                x[2] + ts * x[3], x[3]]
+
+
+class XThetaModel(_LateralModel):
+    """Eq. 20 for x-theta (not printed): as :class:`YPhiModel` with ``vx - Ts u sin(theta) / m``
+    (m x'' = -u sin theta, eq. 1)."""
+
+    __slots__ = ()
+
+    def f0(self, x: Sequence[float], ctx: AffineContext) -> list[float]:
+        """Drift f0(x, u), 4 floats."""
+        ts = self.ts_s
+        return [x[0] + ts * x[1], x[1] - self._ts_m * ctx.thrust_n * ctx.sin_pitch, x[2] + ts * x[3], x[3]]

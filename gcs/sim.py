@@ -1,39 +1,31 @@
-"""In-process closed-loop simulation: plant, sensors, estimator, controller, one loop.
+"""``gcs sim``: the paper's experiments on the in-process plant, through the same mission loop as ``gcs fly``.
 
-The pieces are separate and swappable (rotorpy style): the plant step
-(:func:`quadrotor.plant.step`), the sensors and wind (:mod:`quadrotor`), the estimator
-(:mod:`gcs.estimate`), the reference (:mod:`gcs.mission`) and the controller
-(:mod:`gcs.control`).  :func:`simulate` joins them in one loop; the plant is
-integrated by RK4 at ``plant_substep_s`` (1 ms) with the command held over the
-control period (zero-order hold).
-
-Randomness is seeded per run: the wind of run ``i`` comes from
-``default_rng([seed, i, 1])`` and the sensor noise from ``default_rng([seed, i, 2])``,
-so every controller meets the same wind and noise in run ``i`` (common random
-numbers) and a run is reproducible from ``(seed, i)``.
+:func:`simulate` flies one controller once: the vehicle is a
+:class:`gcs.vehicles.plant.PlantSession` (the reduced plant, its sensors, the estimator,
+seeded wind and noise: run ``i`` of seed ``s`` draws from ``(s, i)``, so every controller
+meets the same disturbances), the loop :class:`gcs.flight.loop.MissionLoop` on simulated
+time, without envelope or timing statistics.  :func:`run_experiment` flies every controller
+``runs`` times and collects the metrics.
 """
 
 from __future__ import annotations
 
-import math
 import numbers
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Sequence
-
-import numpy as np
+from typing import Any, Callable, Sequence
 
 from gcs.config import Config
 from gcs.config.bounds import MAX_RUNS, WEEK_S
+from gcs.control import CONTROLLERS, Controller, make_controller
 from gcs.errors import GcsError
-from gcs.control import CONTROLLERS, Controller, FiniteHorizonController, make_controller, model_params
-from gcs.estimate import StateEstimator
-from gcs.metrics import FlightRecord, controller_cost, flight_metrics, summarize
-from gcs.mission import Mission
-from quadrotor.state import State
-from quadrotor import plant
-from quadrotor.sensors import Sensors
+from gcs.flight.context import FlightContext
+from gcs.flight.loop import MissionLoop
+from gcs.log.recorder import FlightRecorder
+from gcs.log.simrecorder import SimRecorder
+from gcs.metrics import FlightRecord, summarize
+from gcs.vehicles.plant import PlantSession
 from quadrotor.bounds import short_repr
-from quadrotor.wind import Wind, WindParams
+from quadrotor.wind import WindParams
 
 __all__ = ["SimOptions", "SimRun", "SimError", "simulate", "run_experiment", "ExperimentResult", "check_run",
            "MAX_STEPS", "MAX_RUNS"]
@@ -131,78 +123,38 @@ def simulate(config: Config, controller: str, *, run: int = 0, seed: int | None 
     designed : Controller or None
         An already designed ``controller`` for this config to reuse (it is reset);
         None designs one.
-    log : gcs.log.FlightLog, gcs.log.simlog.BackgroundSimLog or None
+    log : gcs.log.FlightLog, a sink of gcs.log.sink (e.g. BackgroundSink) or None
         Log every control tick of this flight (estimate, reference, error, command,
-        horizon, cost, truth, phase events; see :mod:`gcs.log.simlog`), appended after
+        horizon, cost, truth, phase events; see :mod:`gcs.log.simrecorder`), appended after
         what the log already holds.  None: no logging.
 
     Returns
     -------
     SimRun
     """
-    e = config.experiment
     seed = config.sim.seed if seed is None else seed
-    ts = e.ts_s
     _, duration = check_run(config, 1, options)
-    steps = int(round(duration / ts))
     if designed is None:
         ctl = make_controller(controller, config)
     else:
         ctl = designed
         ctl.reset()
-    model = model_params(config)
-    mission = Mission(config.mission, zero_velocity=e.zero_velocity_reference)
-    vehicle = config.vehicle
-
     blow = config.sim.wind_enabled if options.wind is None else options.wind
     if blow and options.wind and config.sim.wind == WindParams():
         raise SimError(f"{config.source}: --wind asked for, but the config describes no wind ([sim.wind])")
-    wind = Wind(config.sim.wind, np.random.default_rng([seed, run, 1])) if blow else None
-    sp = config.sim.sensors
-    sensors = estimator = None
-    if options.noise and not sp.is_ideal:
-        sensors = Sensors(sp, np.random.default_rng([seed, run, 2]))
-        pos_std = sp.position_noise_std_m
-        alt_std = math.sqrt(sp.altitude_noise_std_m ** 2 + sp.altitude_resolution_m ** 2 / 12.0)
-        estimator = StateEstimator(ts, model, (pos_std, pos_std, alt_std), config.estimator.accel_noise_std_m_s2)
-
-    horizon = ctl if isinstance(ctl, FiniteHorizonController) else None
-    plant_step = plant.step
-    state = State()
-    states = [state]
-    refs = []
-    cmds = []
-    j_log = []
-    last = None
-    calm = (0.0, 0.0, 0.0)
-    cost = controller_cost(controller, config)
-    recorder = None
+    session = PlantSession(config, run=run, seed=seed, wind=blow, noise=options.noise)
+    ctx = FlightContext(config, None, FlightRecorder(None))
+    session.attach(ctx)
+    loop = MissionLoop(ctx, controller, ctl, session, stats=False, duration_s=duration, live_period_s=0.0,
+                       close_at_end_time=True)
+    tap = None
     if log is not None:
-        from gcs.log.simlog import SimRecorder
-        recorder = SimRecorder(log, config, ctl, controller, run=run, seed=seed, mission=mission, steps=steps,
-                               cost=cost, states=states, refs=refs, cmds=cmds, j_log=j_log)
-    for k in range(steps):
-        ref = mission.reference(k * ts)
-        if sensors is not None:
-            est = estimator.update(sensors.measure(state), last)  # type: ignore[union-attr]
-        else:
-            est = State(*state)
-        cmd = ctl.step(k, est, ref)
-        state = plant_step(state, cmd, ts, vehicle, wind.sample(ts) if wind is not None else calm)
-        states.append(state)
-        refs.append(ref)
-        cmds.append(cmd)
-        j_log.append((horizon.last_steps_to_go or 0) if horizon is not None else 0)
-        last = cmd
-        if recorder is not None:
-            recorder.tick(est)
-    refs.append(mission.reference(steps * ts))
-    rec = FlightRecord(ts, np.array(states, float), np.array(refs, float), np.array(cmds, float),
-                       np.array(j_log, dtype=np.int64))
-    metrics = flight_metrics(rec, config, mission, cost)
-    if recorder is not None:
-        recorder.finish(metrics)
-    return SimRun(controller, run, seed, rec, metrics)
+        def tap(track):
+            return SimRecorder(log, config, ctl, controller, run=run, seed=seed, mission=loop.mission,
+                               steps=loop.mission_steps, cost=loop.cost, states=track.truths, refs=track.refs,
+                               cmds=track.cmds, j_log=track.js)
+    result = loop.run(tap=tap)
+    return SimRun(controller, run, seed, result.record, result.metrics)
 
 
 @dataclass

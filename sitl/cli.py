@@ -1,19 +1,10 @@
-"""``sitl``: a simulated ArduCopter quadrotor that a MAVLink ground station connects to.
+"""The ``sitl`` command: the simulated ArduCopter (:mod:`sitl.copter`) or, with ``--rig``, the 4-DOF rig.
 
-Examples::
-
-    sitl --udp 127.0.0.1:14550                 # GCS: udpin:127.0.0.1:14550 (like ArduPilot's --out)
-    sitl --udp-listen 14560 --lockstep --seed 3 # GCS: udpout:127.0.0.1:14560, time advances per command
-    sitl --tcp 5760                            # GCS: tcp:127.0.0.1:5760
-    sitl --udp 127.0.0.1:14550 --tcp 5770      # both at once: every peer of each is its own link
-    sitl --pty --baud 57600 --loss 0.02 --latency 0.03   # prints /dev/pts/N: a 915 MHz radio link
-    sitl --rig 4dof --lockstep --seed 1        # prints /dev/pts/N: the 4-DOF rig's XBee link (115200 baud)
-
-The first line on stdout is what the ground station passes to
-``mavutil.mavlink_connection`` (for ``--pty`` and ``--rig``: the device path);
-with several endpoints, one line each, in command-line order.  Bad options
-are refused before anything starts (``sitl: error: --NAME: reason``, exit 2;
-ranges in :mod:`sitl.options`).  Ctrl-C or SIGTERM stop it cleanly (exit 0).
+The first lines on stdout are what the ground station connects to, one per endpoint in
+command-line order (``mavutil.mavlink_connection`` strings; for ``--pty`` and ``--rig`` the device
+path): ``gcs fly`` and the tests read them.  Bad options are refused before anything starts
+(``sitl: error: --NAME: reason``, exit 2; ranges in :mod:`sitl.options`).  Ctrl-C, SIGTERM or the
+end of ``--parent-pid`` stop it cleanly (exit 0).
 """
 
 from __future__ import annotations
@@ -21,29 +12,34 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import os
 import re
 import signal
 import sys
-from typing import NoReturn, Sequence
+import threading
+import time
+from collections.abc import Sequence
+from typing import NoReturn
 
-from quadrotor.errors import QuadrotorError
-from sitl import options
 from quadrotor.clock import MonotonicClock
-from sitl.errors import UsageError
-from sitl.radio import RadioParams
-from sitl.rig import RIG_KINDS, RigServer
-from sitl.rig_dynamics import RigParams
-from sitl.rig_firmware import TICK_NS, RigSafetyParams
-from sitl.rig_sensors import RigSensorParams
-from sitl.server import SitlServer
+from quadrotor.errors import QuadrotorError
 from quadrotor.mavlink.signing import default_state_path
-from sitl.transport import PtyTransport
-from sitl.vehicle_params import MODELS, VehicleParams, bundled_vehicles, load_vehicle
+from sitl import options
+from sitl.copter.server import SitlServer
+from sitl.copter.vehicle import MODELS, VehicleParams
+from sitl.copter.vehicle_file import bundled_vehicles, load_vehicle
+from sitl.errors import UsageError
+from sitl.net.pty import PtyTransport
+from sitl.net.radio import RadioParams
+from sitl.rig.dynamics import RigParams
+from sitl.rig.firmware import TICK_NS, RigSafetyParams
+from sitl.rig.sensors import RigSensorParams
+from sitl.rig.server import RIG_KINDS, RigServer
 
 __all__ = ["main", "build_parser"]
 
 _EPILOG = """\
-conventions (ArduCopter; see sitl/autopilot.py):
+conventions (ArduCopter; see sitl/copter/):
   modes            STABILIZE 0, GUIDED 4, LAND 9, GUIDED_NOGPS 20 (MAV_CMD_DO_SET_MODE or SET_MODE)
   arming           MAV_CMD_COMPONENT_ARM_DISARM; refused (STATUSTEXT "Arm: ...") when leaning more
                    than ATC_ANGLE_MAX, not landed, battery low, or in LAND; param2=21196 forces
@@ -64,7 +60,7 @@ conventions (ArduCopter; see sitl/autopilot.py):
                    are kept in --signing-state, so frames captured before a restart stay refused
   links            every UDP sender, TCP connection and the serial line has its own stream rates
 
-4-DOF rig (--rig 4dof; frames and payloads: sitl/rig_protocol.py, docs/rig-protocol.md):
+4-DOF rig (--rig 4dof; frames and payloads: quadrotor/rig_protocol.py, docs/rig-protocol.md):
   link             XBee API-mode-2 frames on a pseudo-terminal, 115200 baud unless --baud;
                    send a HEARTBEAT first (answered by STATUS)
   control          CONTROL (thrust N, roll/pitch/yaw angular accelerations rad/s^2) or CONTROL_PWM
@@ -94,7 +90,26 @@ def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="sitl", description="Simulated ArduCopter quadrotor (6-DOF physics, sensors, autopilot) "
                 "behind a MAVLink endpoint.", epilog=_EPILOG.format(vehicles=", ".join(bundled_vehicles())),
                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ep = p.add_argument_group("endpoints (any number, combined; default --udp 127.0.0.1:14550)")
+    _endpoint_options(p.add_argument_group("endpoints (any number, combined; default --udp 127.0.0.1:14550)"))
+    _simulation_options(p.add_argument_group("simulation"))
+    _link_options(p.add_argument_group("link emulation (both directions)"))
+    rig = p.add_argument_group("4-DOF rig")
+    rig.add_argument("--rig", choices=RIG_KINDS, default=None,
+                     help="emulate the paper's indoor 4-DOF rig and its XBee serial protocol instead of "
+                          "an ArduCopter; served on a pseudo-terminal (implies --pty)")
+    rig.add_argument("--bit-error-rate", metavar="P", type=float, default=None,
+                     help="with --rig: flip each bit on the link with probability P, both directions")
+    other = p.add_argument_group("other")
+    other.add_argument("--describe", action="store_true",
+                       help="print the vehicle's derived values (hover thrust, torque normalisation) and exit")
+    other.add_argument("-v", "--verbose", action="count", default=0, help="log to stderr (-vv: debug)")
+    other.add_argument("--parent-pid", type=int, metavar="PID",
+                       help="stop when process PID (the ground station that started this SITL) is gone, "
+                            "even if it was killed without a word")
+    return p
+
+
+def _endpoint_options(ep: argparse._ArgumentGroup) -> None:
     ep.add_argument("--udp", metavar="HOST:PORT", dest="endpoints", action=options.EndpointAction, const="udp",
                     help="send to a ground station listening there (it uses udpin:HOST:PORT)")
     ep.add_argument("--udp-listen", metavar="[HOST:]PORT", dest="endpoints", action=options.EndpointAction,
@@ -104,7 +119,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="TCP server (ground station: tcp:HOST:PORT); HOST 127.0.0.1")
     ep.add_argument("--pty", dest="endpoints", action=options.EndpointAction, const="pty", nargs=0,
                     help="serial port on a pseudo-terminal; prints its path (open it like /dev/ttyUSB0)")
-    sim = p.add_argument_group("simulation")
+
+
+def _simulation_options(sim: argparse._ArgumentGroup) -> None:
     sim.add_argument("--vehicle", metavar="NAME|FILE", default=None,
                      help="bundled vehicle name or TOML file (default: quad-1kg)")
     sim.add_argument("--model", choices=MODELS, default=None,
@@ -127,7 +144,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--sysid", metavar="N", type=int, default=None, help="MAVLink system id (SYSID_THISMAV)")
     sim.add_argument("--prearm-delay", metavar="S", type=float, default=0.0,
                      help="refuse arming for S simulated seconds after boot (a real autopilot's EKF takes ~20 s)")
-    link = p.add_argument_group("link emulation (both directions)")
+
+
+def _link_options(link: argparse._ArgumentGroup) -> None:
     link.add_argument("--baud", metavar="N", type=int, default=None,
                       help="byte rate limit as a serial line, 10 bits/byte (default: 115200 with --rig, 57600 with "
                            "--pty, else none; 0 = none)")
@@ -138,20 +157,6 @@ def build_parser() -> argparse.ArgumentParser:
     link.add_argument("--signing-state", metavar="PATH", default=None,
                       help="with --signing-key: file keeping the signing timestamps across restarts (default: "
                            "${XDG_CACHE_HOME:-~/.cache}/quadrotor-sitl/signing-<hash of key and sysid>.json)")
-    rig = p.add_argument_group("4-DOF rig")
-    rig.add_argument("--rig", choices=RIG_KINDS, default=None,
-                     help="emulate the paper's indoor 4-DOF rig and its XBee serial protocol instead of "
-                          "an ArduCopter; served on a pseudo-terminal (implies --pty)")
-    rig.add_argument("--bit-error-rate", metavar="P", type=float, default=None,
-                     help="with --rig: flip each bit on the link with probability P, both directions")
-    other = p.add_argument_group("other")
-    other.add_argument("--describe", action="store_true",
-                       help="print the vehicle's derived values (hover thrust, torque normalisation) and exit")
-    other.add_argument("-v", "--verbose", action="count", default=0, help="log to stderr (-vv: debug)")
-    other.add_argument("--parent-pid", type=int, metavar="PID",
-                       help="stop when process PID (the ground station that started this SITL) is gone, "
-                            "even if it was killed without a word")
-    return p
 
 
 def _describe(v: VehicleParams) -> str:
@@ -212,9 +217,6 @@ def _run_rig(args: argparse.Namespace) -> int:
 
 def _watch_parent(pid: int, stop) -> None:
     """Call ``stop`` once ``pid`` is no longer this process's parent (it died; we were re-parented)."""
-    import os
-    import threading
-    import time
 
     def watch() -> None:
         while os.getppid() == pid:

@@ -30,14 +30,17 @@ from __future__ import annotations
 import argparse
 import hashlib
 import math
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
-from sitl.errors import UsageError
-from sitl.params import ParamStore, ardupilot_params
-from sitl.simulation import InitialConditions
-from sitl.transport import PtyTransport, TcpTransport, Transport, UdpTransport, parse_host_port
-from sitl.vehicle_params import VehicleParams
 from quadrotor.wind import WindParams
+from sitl.copter.params import ParamStore, ardupilot_params
+from sitl.copter.simulation import InitialConditions
+from sitl.copter.vehicle import VehicleParams
+from sitl.errors import UsageError
+from sitl.net.pty import PtyTransport
+from sitl.net.tcp import TcpTransport
+from sitl.net.transport import Transport, parse_host_port
+from sitl.net.udp import UdpTransport
 
 __all__ = ["EndpointAction", "check_common", "check_mavlink", "wind", "params", "signing_key", "initial",
            "open_endpoints", "DEFAULT_ENDPOINT", "MAX_SEED"]
@@ -119,8 +122,8 @@ def wind(text: str | None) -> WindParams | None:
         return None
     v = _floats(text, "--wind", (1, 4))
     names = ("speed", "direction", "gust", "tau")
-    for value, name, (low, high, unit) in zip(v, names, ((0, 100, "m/s"), (-360, 360, "deg"), (0, 50, "m/s"),
-                                                        (0, 3600, "s"))):
+    ranges = ((0, 100, "m/s"), (-360, 360, "deg"), (0, 50, "m/s"), (0, 3600, "s"))
+    for value, name, (low, high, unit) in zip(v, names, ranges, strict=False):  # the values given, 1 to 4
         if not low <= value <= high:
             raise UsageError(f"--wind: {name} must be in [{low:g}, {high:g}] {unit}, got {value:g}")
     if len(v) > 3 and v[3] <= 0:

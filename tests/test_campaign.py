@@ -68,16 +68,18 @@ def test_every_controller_meets_the_same_disturbances(tmp_path):
             jobs = [j for j in plan.jobs if j.experiment == exp and j.run == run]
             assert sorted(j.controller for j in jobs) == sorted(CONTROLLERS)
             assert len({j.disturbances for j in jobs}) == 1
-            strip = [tuple(a for a in j.argv if a not in CONTROLLERS and str(tmp_path) not in a) for j in jobs]
-            assert len(set(strip)) == 1, strip                    # the command lines differ in the controller only
+            strip = [dataclasses.replace(j.spec, controller="", log_path=None) for j in jobs]
+            assert len(set(map(repr, strip))) == 1, strip          # the specs differ in the controller only
     assert plan == plan_campaign(CampaignOptions(("all",), 3, 11, str(tmp_path)))
     indoor = next(j for j in plan.jobs if j.experiment == "indoor-4dof")
-    assert indoor.argv[:3] == ("fly", "--rig", "4dof") and not any(a.startswith("--sitl-arg") for a in indoor.argv)
+    assert indoor.spec.vehicle == "rig" and indoor.spec.sitl_args == () and indoor.argv[:3] == ("fly", "--rig", "4dof")
     alt = next(j for j in plan.jobs if j.experiment == "outdoor-altitude")
-    assert alt.argv[alt.argv.index("--duration") + 1] == "120" and alt.duration_s == 120.0
+    assert alt.spec.duration_s == 120.0 and alt.duration_s == 120.0
+    assert alt.argv[alt.argv.index("--duration") + 1] == "120"
     circle = next(j for j in plan.jobs if j.experiment == "outdoor-circle")
-    assert "--duration" not in circle.argv                    # the whole 60 s mission
-    assert {"--sitl", "lockstep"} <= set(circle.argv) and "-q" in circle.argv and "--log" in circle.argv
+    assert circle.spec.duration_s is None and "--duration" not in circle.argv   # the whole 60 s mission
+    assert circle.spec.lockstep and circle.spec.builtin and circle.spec.log and circle.spec.log_path.endswith(".mcap")
+    assert {"--sitl", "lockstep"} <= set(circle.argv) and "--log" in circle.argv
 
 
 def test_parse_durations():
@@ -223,17 +225,17 @@ def test_dask_and_local_give_identical_tables(small_campaign, tmp_path):
 FAULTS = textwrap.dedent("""
     import os, signal, time
 
-    def die(argv):
+    def die(spec, **kwargs):
         os._exit(9)
 
-    def hang(argv):
+    def hang(spec, **kwargs):
         time.sleep(3600)
 
-    def hang_hard(argv):
+    def hang_hard(spec, **kwargs):
         signal.signal(signal.SIGALRM, signal.SIG_IGN)
         time.sleep(3600)
 
-    def boom(argv):
+    def boom(spec, **kwargs):
         raise RuntimeError("deliberate")
 """)
 
@@ -248,9 +250,9 @@ def test_failed_runs_are_reported_and_the_rest_complete(tmp_path, monkeypatch):
     plan = plan_campaign(CampaignOptions(("outdoor-circle",), 3, 2, str(out), controllers=("pd", "loc"),
                                          durations={"*": 3.0}))
     jobs = list(plan.jobs)
-    # run 0: pd flies with a bad option (exit 2); loc's worker dies.  run 1: pd hangs, loc raises.
+    # run 0: pd flies with a bad option (a config error, exit 2); loc's worker dies.  run 1: pd hangs, loc raises.
     # run 2: pd ignores the deadline signal (killed by the pool), loc flies normally.
-    jobs[0] = dataclasses.replace(jobs[0], argv=jobs[0].argv + ("--stale-timeout", "-1"))
+    jobs[0] = dataclasses.replace(jobs[0], spec=dataclasses.replace(jobs[0].spec, stale_timeout_s=-1.0))
     jobs[1] = dataclasses.replace(jobs[1], entry="campaign_faults:die")
     jobs[2] = dataclasses.replace(jobs[2], entry="campaign_faults:hang", timeout_s=1.0)
     jobs[3] = dataclasses.replace(jobs[3], entry="campaign_faults:boom")
@@ -264,7 +266,7 @@ def test_failed_runs_are_reported_and_the_rest_complete(tmp_path, monkeypatch):
                       "outdoor-circle/pd/run01": "timeout", "outdoor-circle/loc/run01": "crashed",
                       "outdoor-circle/pd/run02": "timeout", "outdoor-circle/loc/run02": "ok"}
     bad = results[0]
-    assert bad.exit_code == 2 and "stale-timeout" in bad.detail and Path(bad.output_path).exists()
+    assert bad.exit_code == 2 and "telemetry_stale_s" in bad.detail and Path(bad.output_path).exists()
     assert "RuntimeError: deliberate" in Path(results[3].output_path).read_text()   # the traceback is kept
     assert "timed out" in Path(results[2].output_path).read_text()
     plan = dataclasses.replace(plan, jobs=tuple(jobs))
@@ -282,12 +284,22 @@ def test_failed_runs_are_reported_and_the_rest_complete(tmp_path, monkeypatch):
 
 
 def test_cli_failed_flights_exit_1_and_are_listed(capsys, tmp_path):
+    # A stale timeout that parses but that the config refuses (fewer than 3 messages): each flight fails (exit 2).
     code, out, err = _campaign(capsys, "--experiment", "outdoor-circle", "--runs", "1", "--controllers", "pd",
-                               "--duration", "2", "--workers", "1", "--fly-arg=--output=bogus", "--no-figures",
+                               "--duration", "2", "--workers", "1", "--fly-arg=--stale-timeout=0.004", "--no-figures",
                                "--out", str(tmp_path), "-q")
     assert code == 1
     assert "failed run outdoor-circle/pd/run00: failed" in err and "1 flights (1 failed)" in out
     assert "| outdoor-circle/pd/run00 | failed | 2 |" in (tmp_path / "RESULTS.md").read_text()
+
+
+def test_cli_bad_fly_args_are_refused_before_anything_flies(capsys, tmp_path):
+    code, out, err = _campaign(capsys, "--experiment", "outdoor-circle", "--runs", "1", "--controllers", "pd",
+                               "--fly-arg=--output=bogus", "--out", str(tmp_path), "-q")
+    assert code == 2 and "--fly-arg" in err and not (tmp_path / "runs").exists()
+    code, out, err = _campaign(capsys, "--experiment", "outdoor-circle", "--runs", "1", "--fly-arg=--seed=3",
+                               "--out", str(tmp_path), "-q")
+    assert code == 2 and "the campaign sets seed" in err
 
 
 def test_indoor_campaign(small_campaign):

@@ -24,7 +24,7 @@ from gcs.metrics import controller_cost, flight_metrics
 from gcs.mission import Mission
 from gcs.sim import SimError, SimOptions, check_run, run_experiment, simulate
 from quadrotor.errors import ConfigError
-from sitl.vehicle_params import VEHICLE_BOUNDS, load_vehicle, parse_vehicle
+from sitl.copter.vehicle_file import VEHICLE_BOUNDS, load_vehicle, parse_vehicle
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "configs"

@@ -23,13 +23,14 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.config import load_config
-from gcs.flight.fly import Flight
-from gcs.flight.streams import StreamMonitor
+from gcs.flight.flight import Flight
 from gcs.flight.validate import TelemetryValidator
 from gcs.link.guard import GuardLimits, OutputGuard
 from gcs.link.mavlink import MavlinkLink
-from sitl.server import SitlServer
-from sitl.transport import UdpTransport
+from gcs.vehicles.mavlink import MavlinkSession
+from gcs.vehicles.streams import StreamMonitor
+from sitl.copter.server import SitlServer
+from sitl.net.udp import UdpTransport
 
 M = mavlink
 
@@ -133,7 +134,7 @@ def fly_through(relay_mutate=None, *, config=None, controller="pd", seed=11, dur
         port = int(server.connection_string.rsplit(":", 1)[1])
         with Relay(("127.0.0.1", port), relay_mutate) as relay:
             link = MavlinkLink(f"udpout:127.0.0.1:{relay.port}")
-            flight = Flight(config, controller, link, None, console=lambda s: None)
+            flight = Flight(config, controller, MavlinkSession(config, link), console=lambda s: None)
             if flight_hook is not None:
                 flight_hook(flight)
             stop = threading.Event()
@@ -142,7 +143,7 @@ def fly_through(relay_mutate=None, *, config=None, controller="pd", seed=11, dur
             try:
                 flight.preflight()
                 result = flight.fly()
-                flight.restore_params()
+                flight.restore()
             finally:
                 stop.set()
                 link.close()
@@ -285,8 +286,8 @@ def test_the_output_guard_replaces_a_bad_setpoint_and_fails_safe():
 
         def preflight():
             orig_preflight()
-            fields = flight.adapter.fields
-            flight.adapter.fields = lambda state, cmd: bad_fields(state, cmd) if flight.stats.ticks >= 250 else \
+            fields = flight.session.adapter.fields
+            flight.session.adapter.fields = lambda state, cmd: bad_fields(state, cmd) if flight.stats.ticks >= 250 else \
                 fields(state, cmd)
         flight.preflight = preflight
 

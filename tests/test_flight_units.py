@@ -7,9 +7,9 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.estimate import StateEstimator
 from quadrotor.clock import ManualClock
-from gcs.flight.output import OutputAdapter, OutputModel
+from gcs.vehicles.output import OutputAdapter, OutputModel
 from gcs.flight.stats import LoopStats
-from gcs.flight.telemetry import Telemetry
+from gcs.vehicles.telemetry import Telemetry
 from quadrotor.frames import quaternion_to_euler
 from quadrotor.state import Command, State
 from gcs.model import ModelParams

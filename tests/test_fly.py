@@ -19,10 +19,11 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.config import load_config
-from gcs.flight.fly import Flight
+from gcs.flight.flight import Flight
 from gcs.link.mavlink import MavlinkLink
-from sitl.server import SitlServer
-from sitl.transport import UdpTransport
+from gcs.vehicles.mavlink import MavlinkSession
+from sitl.copter.server import SitlServer
+from sitl.net.udp import UdpTransport
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 
@@ -209,7 +210,7 @@ def test_telemetry_loss_triggers_the_failsafe_and_the_vehicle_lands():
         port = int(server.connection_string.rsplit(":", 1)[1])
         with DownlinkCutter(("127.0.0.1", port)) as relay:
             link = MavlinkLink(f"udpout:127.0.0.1:{relay.port}")
-            flight = Flight(config, "nlsoc", link, None, console=lambda s: None)
+            flight = Flight(config, "nlsoc", MavlinkSession(config, link), console=lambda s: None)
             flight.preflight()
 
             # Lose the downlink 8 s into the simulation (airborne, holding 2 m).
@@ -257,7 +258,7 @@ def test_telemetry_from_another_system_is_ignored():
         t = threading.Thread(target=intruder, daemon=True)
         t.start()
         try:
-            flight = Flight(cfg, "pd", link, None, console=lambda s: None)
+            flight = Flight(cfg, "pd", MavlinkSession(cfg, link), console=lambda s: None)
             flight.preflight()
             result = flight.fly()
         finally:
@@ -289,7 +290,7 @@ def test_a_mode_change_by_someone_else_stops_the_setpoints():
 
         threading.Thread(target=pilot, daemon=True).start()
         try:
-            flight = Flight(config, "nlsoc", link, None, console=lambda s: None)
+            flight = Flight(config, "nlsoc", MavlinkSession(config, link), console=lambda s: None)
             flight.preflight()
             result = flight.fly()
         finally:
@@ -319,7 +320,7 @@ def test_signed_flight():
     with SitlServer(UdpTransport(("127.0.0.1", 0)), lockstep=True, seed=8, signing_key=key) as server:
         link = MavlinkLink(server.connection_string, signing_key=key)
         try:
-            flight = Flight(cfg, "pd", link, None, console=lambda s: None)
+            flight = Flight(cfg, "pd", MavlinkSession(cfg, link), console=lambda s: None)
             flight.preflight()
             result = flight.fly()
         finally:

@@ -17,16 +17,17 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from gcs.cli import main
 from gcs.config import load_config
 from gcs.errors import LogError
-from gcs.flight.fly import Flight
-from gcs.flight.recorder import FlightRecorder
+from gcs.flight.flight import Flight
+from gcs.vehicles.mavlink import MavlinkSession
 from gcs.link.mavlink import MavlinkLink
 from gcs.log import FlightLog
 from gcs.log import topics as T
-from gcs.log.flightlog import InlineFlightSink
-from gcs.log.reader import read_log
+from gcs.log.mcap.reader import read_log
+from gcs.log.recorder import FlightRecorder
 from gcs.log.review import log_info, log_metrics
-from sitl.server import SitlServer
-from sitl.transport import UdpTransport
+from gcs.log.sink import InlineSink
+from sitl.copter.server import SitlServer
+from sitl.net.udp import UdpTransport
 
 
 def _fly(*args: str, timeout: float = 240) -> tuple[subprocess.CompletedProcess, dict]:
@@ -191,25 +192,25 @@ def test_full_disk_is_refused_before_anything_flies(tmp_path, monkeypatch, capsy
     usage = namedtuple("usage", "total used free")
     monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10 ** 9, 10 ** 9 - 10 ** 6, 10 ** 6))
     started = []
-    monkeypatch.setattr("gcs.flight.command.EmbeddedSitl.start", lambda self: started.append(1) or self)
+    monkeypatch.setattr("gcs.vehicles.embedded.EmbeddedSitl.start", lambda self: started.append(1) or self)
     assert main(["fly", "--sitl", "lockstep", "--log", str(tmp_path / "x.mcap"), "-q"]) == 7
     err = capsys.readouterr().err
     assert "disk nearly full" in err and not started
     assert not (tmp_path / "x.mcap").exists()
 
 
-class _FailingSink(InlineFlightSink):
+class _FailingSink(InlineSink):
     """A log whose disk fills up after ``after`` batches."""
 
     def __init__(self, log: FlightLog, after: int) -> None:
         super().__init__(log)
         self.after = after
 
-    def put_many(self, items: list) -> None:
+    def put_wire(self, wire: list) -> None:
         self.after -= 1
         if self.after < 0:
             raise LogError(f"{self.path}: write failed: No space left on device")
-        super().put_many(items)
+        super().put_wire(wire)
 
 
 def test_a_log_that_fails_in_flight_does_not_stop_the_flight(tmp_path):
@@ -218,7 +219,7 @@ def test_a_log_that_fails_in_flight_does_not_stop_the_flight(tmp_path):
     rec = FlightRecorder(sink)
     with SitlServer(UdpTransport(("127.0.0.1", 0)), lockstep=True, seed=3) as server:
         link = MavlinkLink(server.connection_string)
-        flight = Flight(config, "loc", link, None, recorder=rec)
+        flight = Flight(config, "loc", MavlinkSession(config, link), recorder=rec)
         flight.preflight()
         result = flight.fly()
         link.close()

@@ -11,13 +11,15 @@ import sys
 import pytest
 
 from gcs.config import load_config
-from gcs.flight.rig import RigFlight
+from gcs.flight.flight import Flight
+from gcs.flight.safety import envelope_for
+from gcs.vehicles.rig import RigSession
 from gcs.link.rig import RigLink, rig_link_budget
 from gcs.log.review import log_metrics
 from quadrotor.clock import MonotonicClock
-from sitl.rig import RigServer
+from sitl.rig.server import RigServer
 from quadrotor.rig_protocol import RigFlags, RigState
-from sitl.transport import PtyTransport
+from sitl.net.pty import PtyTransport
 
 
 def gcs_fly(tmp_path, *args: str, timeout: float = 300) -> tuple[subprocess.CompletedProcess, dict]:
@@ -49,7 +51,7 @@ def test_indoor_experiment_on_the_emulator(tmp_path, controller):
         # The printed law does not compensate gravity: indoors it cannot lift off within the 40 s
         # horizon (erratum 8); PD takes over after it.
         from gcs.log import topics as T
-        from gcs.log.reader import read_log
+        from gcs.log.mcap.reader import read_log
 
         lg = read_log(log, [T.STATE, T.HORIZON])
         z = [d["z"] for _, d in lg.decoded(T.STATE)]
@@ -121,7 +123,7 @@ def test_telemetry_loss_ends_in_a_safe_descent(rig):
     cfg = _short()
     cfg = cfg.with_changes("flight", land_timeout_s=5.0)
     link = _DeafLink(rig.connection_string, rig, after_s=8.0)
-    flight = RigFlight(cfg, "nlsoc", link, None)
+    flight = Flight(cfg, "nlsoc", RigSession(cfg, link, envelope_for(cfg)))
     flight.preflight()
     result = flight.fly()
     link.close()
@@ -133,18 +135,25 @@ def test_telemetry_loss_ends_in_a_safe_descent(rig):
     assert snap["state"] == RigState.DISARMED
 
 
-class _Excessive(RigFlight):
+class _Excessive(RigSession):
     """Sends one thrust demand above the rig's 24.5 N command limit, 3 s into the mission."""
 
-    def _send_command(self, state, cmd):
-        if self.stats.ticks == 300:
+    ticks = 0
+
+    def send(self, state, cmd):
+        self.ticks += 1
+        if self.ticks == 301:
             cmd = cmd._replace(thrust_n=40.0)
-        super()._send_command(state, cmd)
+        super().send(state, cmd)
+
+
+def _rig_flight(config, controller, link, session_class=RigSession):
+    return Flight(config, controller, session_class(config, link, envelope_for(config)))
 
 
 def test_the_output_guard_never_sends_an_excessive_command(rig):
     link = RigLink(rig.connection_string)
-    flight = _Excessive(_short(), "pd", link, None)
+    flight = _rig_flight(_short(), "pd", link, _Excessive)
     flight.preflight()
     result = flight.fly()
     link.close()
@@ -158,7 +167,7 @@ def test_the_output_guard_never_sends_an_excessive_command(rig):
 
 def test_an_excessive_command_trips_the_rigs_cutoff_and_the_flight_stops(rig):
     link = RigLink(rig.connection_string)
-    flight = _Excessive(_short(), "pd", link, None)
+    flight = _rig_flight(_short(), "pd", link, _Excessive)
     flight.preflight()
     link.guard = None  # what a ground station without the output guard would send: the rig's own cut-off acts
     result = flight.fly()
@@ -171,12 +180,12 @@ def test_an_excessive_command_trips_the_rigs_cutoff_and_the_flight_stops(rig):
 
 
 def test_an_already_armed_rig_is_refused(rig):
-    from gcs.flight.loop import PreflightRefused
+    from gcs.errors import PreflightRefused
 
-    with rig._lock:
+    with rig.lock:
         rig.firmware.arm()  # someone else's ground station armed it
     link = RigLink(rig.connection_string)
-    flight = RigFlight(_short(), "pd", link, None)
+    flight = _rig_flight(_short(), "pd", link)
     with pytest.raises(PreflightRefused, match="already armed"):
         flight.preflight()
     link.close()
@@ -201,18 +210,18 @@ def test_hostile_rig_messages_are_rejected_and_counted(rig):
     from quadrotor import rig_protocol as rp
 
     link = RigLink(rig.connection_string)
-    flight = RigFlight(_short(), "pd", link, None)
+    flight = _rig_flight(_short(), "pd", link)
     try:
-        flight._handle(rp.Ack(0x7F, 3, 0))  # an ACK of a message type that does not exist
+        flight.session._handle(rp.Ack(0x7F, 3, 0))  # an ACK of a message type that does not exist
         good = rp.Telemetry(1000, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.1, 400, 0, 0)
-        flight._handle(good)
+        flight.session._handle(good)
         for bad in (rp.Telemetry(2000, float("nan"), 0.0, 0.0, 0.0, 0.0, 0.0, 0.1, 400, 0, 0),
                     rp.Telemetry(3000, 0.0, 0.0, 0.0, float("inf"), 0.0, 0.0, 0.1, 400, 0, 0),
                     rp.Telemetry(4000, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1e30, 400, 0, 0),
                     rp.Telemetry(1000, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.1, 400, 0, 0)):  # no newer than the last
-            flight._handle(bad)
-        assert all(math.isfinite(v) for v in flight.estimator.state())
-        assert flight.validator.rejected == {"TELEMETRY: non-finite value": 2, "TELEMETRY: x out of range": 1,
+            flight.session._handle(bad)
+        assert all(math.isfinite(v) for v in flight.session.estimator.state())
+        assert flight.session.validator.rejected == {"TELEMETRY: non-finite value": 2, "TELEMETRY: x out of range": 1,
                                              "TELEMETRY: time stamp did not advance": 1}
         assert any("unknown type 0x7f" in e["text"] for e in flight.events)
     finally:

@@ -10,7 +10,7 @@ import time
 import pytest
 
 from gcs.log import topics as T
-from gcs.log.reader import read_log
+from gcs.log.mcap.reader import read_log
 
 pytestmark = pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs SIGKILL")
 

@@ -15,11 +15,12 @@ from gcs.control import make_controller
 from gcs.errors import LogError
 from gcs.log import FlightLog
 from gcs.log import topics as T
-from gcs.log.flights import logged_metrics, split_flights
+from gcs.log.mcap.reader import read_log
 from gcs.log.meta import write_run_header
-from gcs.log.reader import read_log
+from gcs.log.records import Tick
 from gcs.log.review import compare_logs, export_csv, log_info, log_metrics
-from gcs.log.simlog import BackgroundSimLog
+from gcs.log.review.flights import logged_metrics, split_flights
+from gcs.log.sink import BackgroundSink
 from gcs.metrics import controller_cost, summarize
 from gcs.model import SUBSYSTEMS
 from gcs.sim import SimOptions, simulate
@@ -133,7 +134,7 @@ def test_attachments_and_metadata(sim_log, circle_cfg):
 def test_background_writer_writes_the_same_log(tmp_path, circle_cfg, sim_log):
     _, runs = sim_log
     path = tmp_path / "bg.mcap"
-    with BackgroundSimLog(path) as log:
+    with BackgroundSink(path, overflow="wait") as log:
         write_run_header(log, circle_cfg, ["loc"], {})
         bg_run = simulate(circle_cfg, "loc", run=1, options=SimOptions(duration_s=DURATION_S), log=log)
     assert log.stats["flights"] == 1 and log.stats["bytes"] == path.stat().st_size
@@ -143,15 +144,17 @@ def test_background_writer_writes_the_same_log(tmp_path, circle_cfg, sim_log):
 
 def test_background_writer_reports_failures(tmp_path):
     path = tmp_path / "bad.mcap"
-    log = BackgroundSimLog(path)
-    with pytest.raises(LogError, match="log writer failed: AttributeError"):
-        log.sim_block("not a block")
+    log = BackgroundSink(path, overflow="wait")
+    with pytest.raises(TypeError, match="not a log record"):
+        log.put_many(["not a record"])  # refused here, before it travels
+    with pytest.raises(LogError, match="log writer failed: ValueError: expected 12 values"):
+        log.put_many([Tick(0, 0, (1.0, 2.0), (0.0,) * 12, (0.0,) * 4, None, 0, "pd")])  # fails in the writer
         log.close()
     assert read_log(path, None).message_count == 0  # the file was finished nonetheless
     blocker = tmp_path / "f"
     blocker.write_text("")
     with pytest.raises(LogError, match="cannot create the log directory"):
-        BackgroundSimLog(blocker / "x.mcap")
+        BackgroundSink(blocker / "x.mcap", overflow="wait")
 
 
 def test_gcs_sim_logs_and_gcs_log_metrics_recomputes_its_table(tmp_path, monkeypatch, capsys):
@@ -248,7 +251,7 @@ def test_export_csv(sim_log, tmp_path):
 
 def test_plot_writes_a_png_with_the_panels(sim_log, tmp_path):
     pytest.importorskip("matplotlib")
-    from gcs.log.plot import PANELS, plot_log
+    from gcs.log.review.plot import PANELS, plot_log
 
     path, _ = sim_log
     out = tmp_path / "flight.png"
@@ -314,7 +317,7 @@ def test_flight_log_metrics_use_the_estimate_and_the_limited_command(tmp_path, c
 
 
 def test_streamed_metrics_equal_the_in_memory_ones(sim_log, tmp_path, circle_cfg):
-    from gcs.log.flights import stream_metrics
+    from gcs.log.review.stream import stream_metrics
 
     path, runs = sim_log
     _, rows = stream_metrics(path)

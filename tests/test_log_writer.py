@@ -15,8 +15,8 @@ from mcap.writer import CompressionType, Writer
 from gcs.errors import LogError
 from gcs.log import FlightLog, check_writable
 from gcs.log import topics as T
-from gcs.log.reader import read_log
-from gcs.log.writer import _Writer
+from gcs.log.mcap.fast import FastWriter
+from gcs.log.mcap.reader import read_log
 from quadrotor.state import Command, State
 
 rng = np.random.default_rng(7)
@@ -176,10 +176,10 @@ def test_fast_add_message_writes_the_same_bytes_as_mcap(batched):
         w.finish()
         return buf.getvalue()
 
-    fast = _Writer(io.BytesIO())
-    assert fast._fast, "mcap's Writer internals changed: the fast path is off (still correct, slower)"
+    fast = FastWriter(io.BytesIO())
+    assert fast.fast, "mcap's Writer internals changed: the fast path is off (still correct, slower)"
     if not batched:
-        assert build(_Writer, False) == build(Writer, False)
+        assert build(FastWriter, False) == build(Writer, False)
         return
     # A batch closes a full chunk after its last message, not in the middle: same messages, other chunking.
     def content(data):
@@ -189,7 +189,7 @@ def test_fast_add_message_writes_the_same_bytes_as_mcap(batched):
         return (stats.message_count, dict(stats.channel_message_counts), stats.message_start_time,
                 stats.message_end_time), msgs
 
-    assert content(build(_Writer, True)) == content(build(Writer, False))
+    assert content(build(FastWriter, True)) == content(build(Writer, False))
 
 
 def test_exception_inside_with_still_finishes_the_file(tmp_path):

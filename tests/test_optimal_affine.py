@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from gcs.control import CONTROLLERS, make_controller
+from gcs.control import CONTROLLERS, controller_spec, make_controller
 from gcs.control.loc import finite_horizon_lqr
 from gcs.control.nlsoc import one_step_control
 from gcs.errors import DesignError
@@ -105,7 +105,7 @@ def test_constant_c_equals_the_same_offset_on_every_row():
     rng = np.random.default_rng(3)
     A, B, _, Q, R, H = random_problem(rng, 3, 2, 6)
     c = rng.normal(size=3)
-    for a, b in zip(affine_lqr(A, B, c, Q, R, H, 6), affine_lqr(A, B, np.tile(c, (6, 1)), Q, R, H, 6)):
+    for a, b in zip(affine_lqr(A, B, c, Q, R, H, 6), affine_lqr(A, B, np.tile(c, (6, 1)), Q, R, H, 6), strict=True):
         np.testing.assert_array_equal(a, b)
 
 
@@ -121,7 +121,7 @@ def test_c_is_in_time_order():
     last[-1] = [1.0, 0.0]
     costs = []
     for c in (first, last):
-        K, kff, P, p, s = affine_lqr(A, B, c, Q, R, H, N)
+        _, _, P, p, s = affine_lqr(A, B, c, Q, R, H, N)
         costs.append(affine_lqr_cost(P, p, s, x0))
         assert costs[-1] == pytest.approx(brute_force(A, B, c, Q, R, H, N, x0)[0], rel=1e-10)
     assert costs[0] > costs[1]
@@ -219,7 +219,7 @@ def test_unconstrained_config_sets_horizon_and_lifts_limits(outdoor):
 def test_simulated_nlsoc_is_the_one_step_law_on_the_affine_model(outdoor, name):
     # The rollout feeds the controller the model's state: its inputs are the one-step law
     # u = -(B'EB + R)^-1 B'E f0(x), f0 = A x (+ d for the literal law), E = H on the last step.
-    conv = "compensated" if name == "nlsoc" else "literal"
+    conv = "compensated" if controller_spec(name).gravity_compensated else "literal"
     prob = altitude_problem(outdoor, 0.5, conv)
     ro = simulate_policy(prob, make_controller(name, unconstrained_config(outdoor, 0.5)))
     N = prob.horizon_steps
@@ -250,7 +250,7 @@ def test_table_facts(tables):
     out = {(r.horizon_s, r.convention, r.controller): r for r in tables["outdoor-altitude"]}
     # The gravity-compensated controllers never hit the thrust floor; NLSOC is the closest
     # to the optimum of its own cost outdoors, and the printed law's sag is far from it.
-    for (h, conv, name), r in out.items():
+    for r in out.values():
         assert r.thrust_floor_steps == 0
     for h in (1.0, 20.0):
         ratios = {n: out[(h, "compensated", n)].ratio for n in CONTROLLERS}
@@ -295,13 +295,13 @@ def test_affine_lqr_rejects_bad_arguments(change, match):
 
 def test_affine_lqr_accepts_a_1d_B():
     A, B, c, Q, R, H = _ok()
-    for a, b in zip(affine_lqr(A, B[:, 0], c, Q, R, H, 3), affine_lqr(A, B, c, Q, R, H, 3)):
+    for a, b in zip(affine_lqr(A, B[:, 0], c, Q, R, H, 3), affine_lqr(A, B, c, Q, R, H, 3), strict=True):
         np.testing.assert_array_equal(a, b)
 
 
 def test_cost_and_helpers_reject_bad_arguments(outdoor):
     A, B, c, Q, R, H = _ok()
-    K, kff, P, p, s = affine_lqr(A, B, c, Q, R, H, 4)
+    _, _, P, p, s = affine_lqr(A, B, c, Q, R, H, 4)
     with pytest.raises(ValueError, match=r"x0 has shape \(3,\), expected \(2,\)"):
         affine_lqr_cost(P, p, s, np.zeros(3))
     with pytest.raises(ValueError, match=r"steps must be an integer in 0 .. 4, got 5"):

@@ -18,7 +18,7 @@ Modules, one job each:
 * :mod:`gcs.campaign.figures`: PNG figures like Figs. 4-22 from the flight logs;
 * :mod:`gcs.campaign.report`: RESULTS.md;
 * :mod:`gcs.campaign.campaign`: the whole run and the output folder;
-* :mod:`gcs.campaign.cli`: the ``gcs campaign`` subcommand.
+* :mod:`gcs.cli.campaign`: the ``gcs campaign`` subcommand.
 """
 
 from gcs.campaign.errors import CampaignError

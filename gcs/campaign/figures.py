@@ -3,7 +3,7 @@
 Per experiment, into ``figures/<experiment>/``:
 
 * ``<controller>.png``: one representative run per controller (the completed run with
-  the lowest index), the six panels of ``gcs log plot`` (:func:`gcs.log.plot.plot_log`):
+  the lowest index), the six panels of ``gcs log plot`` (:func:`gcs.log.review.plot.plot_log`):
   altitude vs reference, x-y track, thrust, angular-acceleration commands, attitude,
   velocities (Figs. 4-6, 8-22 show these per controller);
 * ``overlay_altitude.png``: altitude of every controller against the reference (Fig. 7);
@@ -13,8 +13,8 @@ Per experiment, into ``figures/<experiment>/``:
 * ``overlay_attitude.png`` and ``overlay_velocity.png``: roll, pitch, yaw and vx, vy, vz
   (Figs. 13, 14, 17, 18, 21, 22).
 
-The logs are read with :func:`gcs.log.reader.read_log` and
-:func:`gcs.log.flights.flight_arrays` (the estimate the ground station flew on; a
+The logs are read with :func:`gcs.log.mcap.reader.read_log` and
+:func:`gcs.log.review.flights.flight_arrays` (the estimate the ground station flew on; a
 simulation log's truth).  matplotlib is optional: without it (or without logs) the
 figures are skipped and :func:`draw_figures` says why.
 """
@@ -43,8 +43,8 @@ def representative_runs(results: Sequence[Any]) -> dict[tuple[str, str], Any]:
 
 
 def _arrays(path: str) -> dict:
-    from gcs.log.flights import METRIC_TOPICS, flight_arrays, split_flights
-    from gcs.log.reader import read_log
+    from gcs.log.review.flights import METRIC_TOPICS, flight_arrays, split_flights
+    from gcs.log.mcap.reader import read_log
 
     log = read_log(path, METRIC_TOPICS)
     flights = split_flights(log)
@@ -124,7 +124,7 @@ def overlay_figures(experiment: str, arrays: dict[str, dict], out_dir: Path) -> 
 
 def _representative_figure(log_path: str, target: str, key: str) -> tuple[list[str], list[str]]:
     """One task: the six-panel figure of one run."""
-    from gcs.log.plot import plot_log
+    from gcs.log.review.plot import plot_log
 
     Path(target).parent.mkdir(parents=True, exist_ok=True)
     try:

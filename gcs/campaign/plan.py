@@ -30,6 +30,7 @@ from typing import Sequence
 
 import numpy as np
 
+from gcs.api import FlightSpec
 from gcs.campaign.errors import CampaignError
 from gcs.control import CONTROLLERS
 
@@ -203,56 +204,61 @@ def draw_disturbances(seed: int, experiment: str, run: int, *, mavlink: bool = T
 
 @dataclass(frozen=True)
 class Job:
-    """One flight of the campaign: a ``gcs`` command line and where its files go.
+    """One flight of the campaign: its :class:`gcs.api.FlightSpec` and where its files go.
 
     Attributes
     ----------
     experiment, controller : str
     run : int
     disturbances : Disturbances
-    argv : tuple of str
-        Arguments of :func:`gcs.cli.main` (no program name).
+    spec : FlightSpec
+        What :func:`gcs.api.fly` flies (lockstep, the run's seed and disturbances, the log path).
     output_path : str
         The flight's stdout and stderr.
     summary_path : str
-        ``gcs fly --summary`` file.
+        The end-of-flight summary (what ``gcs fly --summary`` writes).
     log_path : str or None
-        ``gcs fly --log`` file (None when ``gcs fly`` cannot log).
+        The MCAP flight log.
     duration_s : float
         Mission seconds planned.
     timeout_s : float
         Wall seconds after which the run is stopped and reported as hung.
     entry : str
-        ``module:function`` called with ``argv`` (``gcs.cli:main``; tests inject others).
+        ``module:function`` called with the spec (:func:`gcs.api.fly`; tests inject others).
     """
 
     experiment: str
     controller: str
     run: int
     disturbances: Disturbances
-    argv: tuple[str, ...]
+    spec: FlightSpec
     output_path: str
     summary_path: str
     log_path: str | None
     duration_s: float
     timeout_s: float
-    entry: str = "gcs.cli:main"
+    entry: str = "gcs.api:fly"
 
     @property
     def key(self) -> str:
         """``experiment/controller/runNN``: unique in a campaign."""
         return f"{self.experiment}/{self.controller}/run{self.run:02d}"
 
+    @property
+    def argv(self) -> tuple[str, ...]:
+        """The equivalent ``gcs fly`` command line (without the program name)."""
+        return tuple(self.spec.command_line(self.summary_path)[1:])
+
     def to_json(self) -> dict:
         return {"key": self.key, "experiment": self.experiment, "controller": self.controller, "run": self.run,
-                "disturbances": self.disturbances.to_json(), "argv": ["gcs", *self.argv],
+                "disturbances": self.disturbances.to_json(), "argv": ["gcs", *self.argv], "spec": self.spec.to_json(),
                 "output": self.output_path, "summary": self.summary_path, "log": self.log_path,
                 "duration_s": self.duration_s, "timeout_s": self.timeout_s}
 
 
 @dataclass(frozen=True)
 class CampaignOptions:
-    """What ``gcs campaign`` was asked for (see :mod:`gcs.campaign.cli`).
+    """What ``gcs campaign`` was asked for (see :mod:`gcs.cli.campaign`).
 
     Attributes
     ----------
@@ -270,8 +276,8 @@ class CampaignOptions:
     disturbances : DisturbanceModel
     timeout_s : float or None
         Per-run wall timeout; None = :func:`default_timeout_s`.
-    extra_fly_args : tuple of str
-        Appended to every ``gcs fly`` command line.
+    fly_overrides : dict
+        :class:`gcs.api.FlightSpec` fields set for every flight (``--fly-arg`` options).
     """
 
     experiments: tuple[str, ...]
@@ -283,7 +289,7 @@ class CampaignOptions:
     duration_scale: float = 1.0
     disturbances: DisturbanceModel = DisturbanceModel()
     timeout_s: float | None = None
-    extra_fly_args: tuple[str, ...] = ()
+    fly_overrides: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -409,18 +415,12 @@ def plan_campaign(options: CampaignOptions) -> Plan:
                                      model=options.disturbances)
             for ctl in options.controllers:
                 base = out / "runs" / spec.name / ctl / f"run{run:02d}"
-                argv = ["fly"]
-                if spec.rig is not None:
-                    argv += ["--rig", spec.rig]
-                argv += ["--config", spec.config, "--controller", ctl, "--sitl", "lockstep",
-                         "--seed", str(dist.seed)]
-                argv += [f"--sitl-arg={a}" for a in dist.sitl_args()]
-                if cut:
-                    argv += ["--duration", _num(d)]
-                argv += ["--summary", str(base) + ".json"]
                 log = str(base) + ".mcap"
-                argv += ["--log", log]
-                argv += ["-q", *options.extra_fly_args]
-                jobs.append(Job(spec.name, ctl, run, dist, tuple(argv), str(base) + ".out", str(base) + ".json",
+                extra = dict(options.fly_overrides)
+                sitl_args = dist.sitl_args() + tuple(extra.pop("sitl_args", ()))
+                fspec = FlightSpec(controller=ctl, config=spec.config, vehicle="rig" if spec.rig else "mavlink",
+                                   lockstep=True, seed=dist.seed, sitl_args=sitl_args,
+                                   duration_s=d if cut else None, log_path=log, **extra)
+                jobs.append(Job(spec.name, ctl, run, dist, fspec, str(base) + ".out", str(base) + ".json",
                                 log, d, timeout))
     return Plan(options, tuple(flown), tuple(jobs), planned, skipped, tuple(notes))

@@ -1,6 +1,6 @@
-"""One flight of a campaign: run its ``gcs fly`` command line and read its summary.
+"""One flight of a campaign: fly its :class:`gcs.api.FlightSpec` and keep its summary.
 
-:func:`run_job` calls ``gcs.cli.main(argv)`` in the calling process (a campaign worker:
+:func:`run_job` calls :func:`gcs.api.fly` in the calling process (a campaign worker:
 the imports are paid once per worker, not once per flight), with stdout and stderr
 (file descriptors 1 and 2, so the flight's own children's output too) sent to the run's
 output file and a wall-clock deadline (``SIGALRM``: the main thread only).  At the
@@ -29,11 +29,13 @@ import sys
 import threading
 import time
 import traceback
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
+from gcs.api import FlightSpec
 from gcs.campaign.plan import Disturbances, Job
+from quadrotor.errors import QuadrotorError
 
 __all__ = ["RunResult", "RunTimeout", "run_job", "run_job_isolated", "failed_result", "kill_tree", "GRACE_S",
            "STATUSES", "job_to_json", "job_from_json", "serve", "worker_command", "parse_result_line",
@@ -121,9 +123,29 @@ def failed_result(job: Job, status: str, detail: str, *, wall_s: float = 0.0,
                      None, {}, 0.0, wall_s, detail, job.output_path, job.summary_path, job.log_path)
 
 
-def _entry(name: str) -> Callable[[list[str]], int]:
+def _entry(name: str) -> Callable[..., Any]:
     module, _, func = name.partition(":")
     return getattr(importlib.import_module(module), func)
+
+
+def _quiet(line: str) -> None:
+    """``gcs fly -q``'s console: warnings, failsafes and the landing only."""
+    if line.startswith(("[failsafe]", "[warning]", "[interrupt]", "[landed]")):
+        print(line, flush=True)
+
+
+def _fly_job(job: Job) -> int:
+    """Fly the job's spec, write its summary; the exit code (2 for a spec the config refuses)."""
+    try:
+        result = _entry(job.entry)(job.spec, console=_quiet, report=lambda text: print(text, file=sys.stderr))
+    except QuadrotorError as exc:
+        print(f"gcs: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    Path(job.summary_path).write_text(json.dumps(result.to_json(), indent=1))
+    if result.exit_reason != "completed":
+        print(f"gcs fly: {result.exit_reason} (exit {result.exit_code})" + (f": {result.detail}" if result.detail
+                                                                           else ""), file=sys.stderr)
+    return result.exit_code
 
 
 @contextlib.contextmanager
@@ -219,10 +241,7 @@ def run_job(job: Job) -> RunResult:
     with _redirected(job.output_path) as out:
         try:
             with _Deadline(job.timeout_s) as deadline:
-                try:
-                    code = _entry(job.entry)(list(job.argv))
-                except SystemExit as exc:  # argparse errors exit 2 from inside main()
-                    code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+                code = _fly_job(job)
                 deadline.disarm()
         except RunTimeout as exc:
             status, detail = "timeout", f"timed out: {exc}"
@@ -264,7 +283,9 @@ def _reproducibility(summary: dict) -> tuple[int, float | None]:
 
 # --------------------------------------------------------------------------- child interpreter
 def job_to_json(job: Job) -> str:
-    d = asdict(job)
+    d = {f.name: getattr(job, f.name) for f in fields(job)}
+    d["disturbances"] = asdict(job.disturbances)
+    d["spec"] = job.spec.to_json()
     return json.dumps(d)
 
 
@@ -273,7 +294,7 @@ def job_from_json(text: str) -> Job:
     dist = d.pop("disturbances")
     dist = Disturbances(dist["seed"], tuple(dist["wind"]) if dist["wind"] else None,
                         tuple(dist["start_attitude_deg"]) if dist["start_attitude_deg"] else None)
-    d["argv"] = tuple(d["argv"])
+    d["spec"] = FlightSpec.from_json(d["spec"])
     return Job(disturbances=dist, **d)
 
 

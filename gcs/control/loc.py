@@ -1,106 +1,45 @@
 """LOC: finite-horizon discrete LQR on the exactly linearised model (paper section 2).
 
-Design (pure): :func:`finite_horizon_lqr` runs the backward Riccati recursion
-in steps-to-go j (erratum 1: ``A - BF``, not ``A + BF``)::
-
-    P(0) = H
-    F(j) = (R + B' P(j-1) B)^-1 B' P(j-1) A
-    P(j) = (A - B F(j))' P(j-1) (A - B F(j)) + F(j)' R F(j) + Q
-
-and at time k the law applies ``u = -F(N - k) x``.  Policy: z through the
-exact linearisation ``u = m (u1 + g) / (cos(theta) cos(phi))`` (eq. 3), yaw,
-and the small-angle y-phi and x-theta subsystems, all in error coordinates
-(state - reference, attitude references 0).
+Design (pure, matrices in, arrays out): :func:`design_loc` runs the backward Riccati recursion
+(eqs. 6-7, erratum 1: ``A - BF``; :func:`gcs.control.riccati.finite_horizon_lqr`) on the
+models of :mod:`gcs.model` (eq. 4 for z and yaw, eq. 8 for y-phi and its x-theta twin);
+:func:`design_loc_from_config` reads the matrices from a config.  At time k the law applies
+``u = -F(N - k) x`` (eq. 6).  Policy: z through the exact linearisation
+``u = m (u1 + g) / (cos(theta) cos(phi))`` (eq. 3), yaw, and the small-angle y-phi and
+x-theta subsystems, all in error coordinates (state - reference, attitude references 0).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
 from gcs.config import Config
 from gcs.control.base import Controller, FiniteHorizonController, Limits, StagedLaw, wrap_angle
+from gcs.control.riccati import finite_horizon_lqr
 from gcs.errors import DesignError
-from quadrotor.state import Command, State
 from gcs.model import ModelParams, linear_psi, linear_x_theta, linear_y_phi, linear_z, tilt_cos
+from quadrotor.state import Command, State
 
-__all__ = ["finite_horizon_lqr", "LocDesign", "design_loc", "LocLaw", "make_loc"]
+__all__ = ["finite_horizon_lqr", "LOC_SUBSYSTEMS", "loc_models", "LocDesign", "design_loc", "design_loc_from_config",
+           "LocLaw", "make_loc"]
 
-
-def _check_weights(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray, h: np.ndarray) -> None:
-    n, m = b.shape
-    if a.shape != (n, n):
-        raise DesignError(f"A matrix is the wrong shape: {a.shape}, expected {(n, n)}")
-    if q.shape != (n, n):
-        raise DesignError(f"Q matrix is the wrong shape: {q.shape}, expected {(n, n)}")
-    if h.shape != (n, n):
-        raise DesignError(f"H matrix is the wrong shape: {h.shape}, expected {(n, n)}")
-    if r.shape != (m, m):
-        raise DesignError(f"R matrix is the wrong shape: {r.shape}, expected {(m, m)}")
-    for name, mat in (("Q", q), ("H", h)):
-        if not np.allclose(mat, mat.T):
-            raise DesignError(f"{name} matrix is not symmetric")
-        if np.linalg.eigvalsh(mat).min() < -1e-9 * max(1.0, np.abs(mat).max()):
-            raise DesignError(f"{name} matrix is not positive semidefinite")
-    if not np.allclose(r, r.T) or np.linalg.eigvalsh(r).min() <= 0:
-        raise DesignError("R matrix is not symmetric positive definite")
+#: The LOC subsystems, each with its own gain table.
+LOC_SUBSYSTEMS = ("z", "psi", "y_phi", "x_theta")
 
 
-def finite_horizon_lqr(A, B, Q, R, H, N: int, *, rtol: float = 1e-14) -> tuple[np.ndarray, np.ndarray]:
-    """Finite-horizon discrete LQR gain table.
-
-    Parameters
-    ----------
-    A : array_like, shape (n, n)
-    B : array_like, shape (n, m)
-    Q, H : array_like, shape (n, n)
-        Stage and terminal state weights, symmetric positive semidefinite.
-    R : array_like, shape (m, m)
-        Input weight, symmetric positive definite.
-    N : int
-        Horizon in steps, >= 1.
-    rtol : float
-        Once ``|P(j) - P(j-1)| <= rtol |P(j)|`` the recursion has reached its
-        fixed point and the remaining entries repeat the last gain.
-
-    Returns
-    -------
-    F : ndarray, shape (N, m, n)
-        ``F[j - 1]`` is the gain with j steps to go; apply ``u(k) = -F[N - k - 1] x(k)``.
-    P : ndarray, shape (N + 1, n, n)
-        Cost-to-go matrices, ``P[0] = H``; the optimal cost from x(0) is ``x' P[N] x / 2``.
-    """
-    a, b = np.atleast_2d(np.asarray(A, float)), np.atleast_2d(np.asarray(B, float))
-    q, r, h = (np.atleast_2d(np.asarray(x, float)) for x in (Q, R, H))
-    if b.ndim != 2 or b.shape[0] != a.shape[0]:
-        raise DesignError(f"B matrix is the wrong shape: {b.shape}")
-    _check_weights(a, b, q, r, h)
-    if int(N) != N or N < 1:
-        raise DesignError(f"horizon N must be an integer >= 1, got {N!r}")
-    n, m = b.shape
-    F = np.empty((N, m, n))
-    P = np.empty((N + 1, n, n))
-    P[0] = h
-    p = h
-    for j in range(1, N + 1):
-        f = np.linalg.solve(r + b.T @ p @ b, b.T @ p @ a)
-        acl = a - b @ f
-        p_new = acl.T @ p @ acl + f.T @ r @ f + q
-        p_new = 0.5 * (p_new + p_new.T)
-        F[j - 1] = f
-        P[j] = p_new
-        if np.max(np.abs(p_new - p)) <= rtol * np.max(np.abs(p_new)):
-            F[j:] = f
-            P[j + 1:] = p_new
-            break
-        p = p_new
-    return F, P
+def loc_models(ts_s: float, gravity_m_s2: float) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """``{subsystem: (A, B)}``: eq. 4 (z, and yaw), eq. 8 (y-phi) and its x-theta twin."""
+    return {"z": linear_z(ts_s), "psi": linear_psi(ts_s), "y_phi": linear_y_phi(ts_s, gravity_m_s2),
+            "x_theta": linear_x_theta(ts_s, gravity_m_s2)}
 
 
 @dataclass(frozen=True)
 class LocDesign:
-    """Gain tables of the four LOC subsystems, each shape (N, 1, n)."""
+    """Gain tables of the four LOC subsystems, each shape (N, 1, n) (n = 2 for z and psi, 4 for
+    y-phi and x-theta); ``F_<name>[j - 1]`` is the gain with j steps to go."""
 
     ts_s: float
     horizon_steps: int
@@ -110,19 +49,48 @@ class LocDesign:
     F_x_theta: np.ndarray
 
 
-def design_loc(config: Config) -> LocDesign:
-    """Riccati gain tables for z (exact linearisation), psi, y-phi and x-theta."""
-    e = config.experiment
-    ts, n, g = e.ts_s, e.horizon_steps, config.vehicle.gravity_m_s2
-    systems = {"z": linear_z(ts), "psi": linear_psi(ts), "y_phi": linear_y_phi(ts, g), "x_theta": linear_x_theta(ts, g)}
+def design_loc(ts_s: float, gravity_m_s2: float, weights: Mapping[str, tuple], horizon_steps: int) -> LocDesign:
+    """Riccati gain tables (eqs. 6-7) for z (exact linearisation), psi, y-phi and x-theta.
+
+    Parameters
+    ----------
+    ts_s : float
+        Sampling period T [s].
+    gravity_m_s2 : float
+        g in eq. 8's A(2,3) = g T [m/s^2].
+    weights : mapping
+        ``{"z": (Q, R, H), "psi": ..., "y_phi": ..., "x_theta": ...}``: Q, H shape (n, n), R (1, 1).
+    horizon_steps : int
+        N >= 1.
+
+    Returns
+    -------
+    LocDesign
+
+    Raises
+    ------
+    gcs.errors.DesignError
+        Bad weights or horizon (message prefixed ``loc.<subsystem>``).
+    """
     tables = {}
-    for name, (a, b) in systems.items():
-        q, r, h = config.loc[name].resolved(e.matrices)
+    for name, (a, b) in loc_models(ts_s, gravity_m_s2).items():
         try:
-            tables[name], _ = finite_horizon_lqr(a, b, q, r, h, n)
+            tables[name], _ = finite_horizon_lqr(a, b, *weights[name], horizon_steps)
         except DesignError as exc:
-            raise DesignError(f"{config.source}: loc.{name}: {exc}") from None
-    return LocDesign(ts, n, tables["z"], tables["psi"], tables["y_phi"], tables["x_theta"])
+            raise DesignError(f"loc.{name}: {exc}") from None
+    return LocDesign(ts_s, horizon_steps, tables["z"], tables["psi"], tables["y_phi"], tables["x_theta"])
+
+
+def design_loc_from_config(config: Config) -> LocDesign:
+    """:func:`design_loc` with the config's period, gravity, LOC matrices (in its matrix mode) and horizon."""
+    e = config.experiment
+    weights = {name: config.loc[name].resolved(e.matrices) for name in LOC_SUBSYSTEMS}
+    try:
+        return design_loc(e.ts_s, config.vehicle.gravity_m_s2, weights, e.horizon_steps)
+    except DesignError as exc:
+        raise DesignError(f"{config.source}: {exc}") from None
+
+
 
 
 def _settled_length(table: np.ndarray) -> int:
@@ -161,8 +129,9 @@ class LocLaw(StagedLaw):
         return self.limits.saturate(thrust, t_roll, t_pitch, t_yaw)
 
 
-def make_loc(config: Config, model: ModelParams, limits: Limits, fallback: Controller | None) -> FiniteHorizonController:
+def make_loc(config: Config, model: ModelParams, limits: Limits,
+             fallback: Controller | None) -> FiniteHorizonController:
     """Design LOC for ``config`` and wrap it in its horizon schedule."""
-    design = design_loc(config)
+    design = design_loc_from_config(config)
     e = config.experiment
     return FiniteHorizonController("loc", LocLaw(design, model, limits), e.horizon_steps, e.after_horizon, fallback)

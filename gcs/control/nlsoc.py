@@ -6,12 +6,15 @@ minimiser of the next state's weighted cost::
 
     u(k) = -(f1' E f1 + R)^-1 f1' E f0(x(k)),   E = H at the last step (j = 1), else Q
 
-evaluated at the current state (erratum 4).  :func:`one_step_control` is the
-general law in matrix form (the reference); :class:`AffineSubsystem` flies it
-without numpy, looping over the structural non-zeros of f1 only, which gives
-the same numbers at a fraction of the cost (a test compares them).
+evaluated at the current state (eq. 12 for the last step, its k >= 2 form after eq. 15;
+erratum 4).  :func:`one_step_control` is the law in numpy (the reference, any n, m);
+:func:`one_step_law` evaluates the same formula in plain Python for n = 4, m <= 2 and is
+what flies (numpy costs microseconds per call; a test compares the two).
 
-Applied to z-psi (eq. 16), y-phi and x-theta (eq. 20) in error coordinates.
+Applied to the models of :mod:`gcs.model` in error coordinates: z-psi (eq. 16,
+:class:`gcs.model.ZPsiModel`), y-phi (eq. 20, :class:`gcs.model.YPhiModel`) and x-theta
+(:class:`gcs.model.XThetaModel`).  :func:`design_nlsoc` takes the matrices;
+:func:`design_nlsoc_from_config` reads them from a config.
 ``nlsoc`` flies the gravity-compensated law of erratum 8: the thrust is
 ``m g / (cos(theta) cos(phi))`` plus the same law applied to the model with the
 ``-g Ts`` term removed (R then weighs the deviation from hover);
@@ -22,30 +25,34 @@ The x-theta matrices are the y-phi ones mirrored, ``E = S E S`` with
 
 from __future__ import annotations
 
-import math
-import operator
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Protocol
 
 import numpy as np
 
 from gcs.config import Config
 from gcs.control.base import Controller, FiniteHorizonController, Limits, StagedLaw, wrap_angle
+from gcs.control.smallmat import dot, mat_vec, vec_mat
 from gcs.errors import DesignError
+from gcs.model import AffineContext, ModelParams, XThetaModel, YPhiModel, ZPsiModel, tilt_cos
 from quadrotor.state import Command, State
-from gcs.model import ModelParams, tilt_cos
 
-__all__ = ["one_step_control", "AffineSubsystem", "NlsocDesign", "design_nlsoc", "NlsocLaw", "make_nlsoc",
-           "z_psi_subsystem", "lateral_subsystem", "MIRROR"]
+__all__ = ["one_step_control", "one_step_law", "AffineSubsystem", "NlsocDesign", "design_nlsoc",
+           "design_nlsoc_from_config", "nlsoc_weights", "NlsocLaw", "make_nlsoc", "z_psi_subsystem",
+           "lateral_subsystem", "MIRROR", "NLSOC_SUBSYSTEMS"]
 
 #: S = diag(-1, -1, 1, 1): maps y-phi coordinates to mirrored x-theta ones (erratum 6).
 MIRROR = np.diag([-1.0, -1.0, 1.0, 1.0])
 
-_dot = operator.mul
+#: The subsystems NLSOC controls, in the order it flies them (z-psi first: its thrust feeds eq. 20).
+NLSOC_SUBSYSTEMS = ("z_psi", "y_phi", "x_theta")
 
 
 def one_step_control(f0, f1, E, R) -> np.ndarray:
-    """The general NLSOC law ``u = -(f1' E f1 + R)^-1 f1' E f0``.
+    """The general NLSOC law ``u = -(f1' E f1 + R)^-1 f1' E f0`` (eq. 12; eq. 19 for z-psi), numpy.
+
+    The reference for :func:`one_step_law`, for any n and m.
 
     Parameters
     ----------
@@ -77,122 +84,130 @@ def one_step_control(f0, f1, E, R) -> np.ndarray:
     return -np.linalg.solve(f1.T @ E @ f1 + R, f1.T @ E @ f0)
 
 
+def one_step_law(f0: Sequence[float], f1: Sequence[Sequence[float]], E: Sequence[Sequence[float]],
+                 R: Sequence[Sequence[float]]) -> list[float]:
+    """The same law as :func:`one_step_control`, ``u = -(f1' E f1 + R)^-1 f1' E f0``, in plain Python.
+
+    What flies at every control step: for n = 4 and m = 1 or 2 the products are written out
+    (:mod:`gcs.control.smallmat`) and ``(f1' E f1 + R)`` is inverted in closed form; other
+    sizes go to :func:`one_step_control`.  ``f1' E f1`` is evaluated as ``(f1' E) f1`` and
+    ``f1' E f0`` as ``f1' (E f0)``: the rounding of the sparse loop that flew before, so the
+    commands are the same to the last bit.
+
+    Parameters
+    ----------
+    f0 : sequence of n floats
+    f1 : n rows of m floats
+    E : n rows of n floats
+        H at the last step of the horizon, Q otherwise (need not be symmetric).
+    R : m rows of m floats
+
+    Returns
+    -------
+    list of m floats
+    """
+    if len(f0) != 4 or len(R) > 2:
+        return one_step_control(f0, f1, E, R).tolist()
+    Ef0 = mat_vec(E, f0)
+    if len(R) == 1:
+        (a0,), (a1,), (a2,), (a3,) = f1
+        a = (a0, a1, a2, a3)                                   # f1's column
+        g = R[0][0] + dot(vec_mat(a, E), a)                    # f1' E f1 + R
+        return [-dot(a, Ef0) / g]                              # -(...)^-1 f1' E f0
+    (a0, b0), (a1, b1), (a2, b2), (a3, b3) = f1
+    a, b = (a0, a1, a2, a3), (b0, b1, b2, b3)                  # f1's columns
+    aE, bE = vec_mat(a, E), vec_mat(b, E)                      # f1' E
+    (r00, r01), (r10, r11) = R
+    g00, g01 = r00 + dot(aE, a), r01 + dot(aE, b)              # G = f1' E f1 + R
+    g10, g11 = r10 + dot(bE, a), r11 + dot(bE, b)
+    h0, h1 = dot(a, Ef0), dot(b, Ef0)                          # f1' E f0
+    det = g00 * g11 - g01 * g10
+    return [-(g11 * h0 - g01 * h1) / det, -(g00 * h1 - g10 * h0) / det]   # -G^-1 (f1' E f0)
+
+
+class AffineModel(Protocol):
+    """An affine discrete model ``x(k+1) = f0(x, ctx) + f1(x, ctx) u`` (eq. 9), as in :mod:`gcs.model`."""
+
+    n: int
+    m: int
+
+    def f0(self, x: Sequence[float], ctx: AffineContext) -> Sequence[float]: ...
+
+    def f1(self, x: Sequence[float], ctx: AffineContext) -> Sequence[Sequence[float]]: ...
+
+
 @dataclass(frozen=True)
 class AffineSubsystem:
-    """An affine discrete system ``x+ = f0(x, ctx) + f1(x, ctx) u`` with its weights.
+    """An affine subsystem (its model, eq. 16 or eq. 20) with the weights of its cost (eq. 17).
 
     Attributes
     ----------
     name : str
-    n, m : int
-        State and input sizes.
-    f0 : callable (x, ctx) -> list of n floats
-    f1_pattern : tuple of (row, column)
-        Structural non-zeros of f1 (all entries for a dense f1).
-    f1_values : callable (x, ctx) -> list of floats, one per pattern entry
-    Q, R, H : ndarray
+    model : AffineModel
+        ``f0(x, ctx)`` and ``f1(x, ctx)`` (n = ``model.n``, m = ``model.m``).
+    Q, R, H : ndarray, shapes (n, n), (m, m), (n, n)
     """
 
     name: str
-    n: int
-    m: int
-    f0: Callable[[Sequence[float], object], list]
-    f1_pattern: tuple[tuple[int, int], ...]
-    f1_values: Callable[[Sequence[float], object], list]
+    model: AffineModel
     Q: np.ndarray
     R: np.ndarray
     H: np.ndarray
 
     def __post_init__(self) -> None:
-        for name, mat, shape in (("Q", self.Q, (self.n, self.n)), ("H", self.H, (self.n, self.n)), ("R", self.R, (self.m, self.m))):
+        n, m = self.model.n, self.model.m
+        for name, mat, shape in (("Q", self.Q, (n, n)), ("H", self.H, (n, n)), ("R", self.R, (m, m))):
             if np.shape(mat) != shape:
                 raise DesignError(f"{self.name}: {name} matrix is the wrong shape: {np.shape(mat)}, expected {shape}")
         if np.linalg.eigvalsh(0.5 * (self.R + self.R.T)).min() <= 0:
             raise DesignError(f"{self.name}: R matrix is not positive definite")
-        object.__setattr__(self, "_rows", {True: self.H.tolist(), False: self.Q.tolist()})
-        object.__setattr__(self, "_r", self.R.tolist())
+        # The weights as lists of rows, for one_step_law: E = H at the last step, Q before.
+        object.__setattr__(self, "_E", {True: self.H.tolist(), False: self.Q.tolist()})
+        object.__setattr__(self, "_R", self.R.tolist())
 
-    def f1_dense(self, x: Sequence[float], ctx: object) -> np.ndarray:
+    @property
+    def n(self) -> int:
+        return self.model.n
+
+    @property
+    def m(self) -> int:
+        return self.model.m
+
+    def f1_dense(self, x: Sequence[float] | None, ctx: AffineContext) -> np.ndarray:
         """f1 as an (n, m) array."""
-        out = np.zeros((self.n, self.m))
-        for (i, a), v in zip(self.f1_pattern, self.f1_values(x, ctx)):
-            out[i, a] = v
-        return out
+        return np.array(self.model.f1(x, ctx), float).reshape(self.n, self.m)
 
-    def control(self, j: int, x: Sequence[float], ctx: object) -> list[float]:
+    def control(self, j: int, x: Sequence[float], ctx: AffineContext) -> list[float]:
         """The law with j steps to go (E = H when j == 1, else Q), as a list of m floats."""
-        E = self._rows[j == 1]  # type: ignore[attr-defined]
-        f0 = self.f0(x, ctx)
-        vals = self.f1_values(x, ctx)
-        pat = self.f1_pattern
-        m = self.m
-        b = [0.0] * m
-        M = [row[:] for row in self._r]  # type: ignore[attr-defined]
-        for (i, a), v in zip(pat, vals):
-            Ei = E[i]
-            b[a] += v * sum(map(_dot, Ei, f0))
-            for (i2, a2), v2 in zip(pat, vals):
-                M[a][a2] += v * Ei[i2] * v2
-        if m == 1:
-            return [-b[0] / M[0][0]]
-        if m == 2:
-            (p, q), (r, s) = M
-            det = p * s - q * r
-            return [-(s * b[0] - q * b[1]) / det, -(p * b[1] - r * b[0]) / det]
-        return (-np.linalg.solve(np.array(M), np.array(b))).tolist()
+        E = self._E[j == 1]  # type: ignore[attr-defined]
+        model = self.model
+        return one_step_law(model.f0(x, ctx), model.f1(x, ctx), E, self._R)  # type: ignore[attr-defined]
 
 
-@dataclass
-class _Ctx:
-    """Per-step context of the subsystem models: attitude and the thrust applied."""
-
-    cos_roll: float = 1.0
-    sin_roll: float = 0.0
-    cos_pitch: float = 1.0
-    sin_pitch: float = 0.0
-    thrust_n: float = 0.0
+def _weights(Q, R, H) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return np.asarray(Q, float), np.atleast_2d(np.asarray(R, float)), np.asarray(H, float)
 
 
 def z_psi_subsystem(ts: float, model: ModelParams, Q, R, H, *, gravity_in_f0: bool) -> AffineSubsystem:
-    """Eq. 16 in error coordinates, state [e_z, e_vz, e_yaw, e_yaw_rate], input [u, tau_psi].
+    """Eq. 16 (:class:`gcs.model.ZPsiModel`) in error coordinates with its weights.
 
-    With ``gravity_in_f0=False`` the ``-g Ts`` term is dropped: the input is then the
-    thrust deviation from hover (erratum 8).
+    State [e_z, e_vz, e_yaw, e_yaw_rate], input [u, tau_psi]; with ``gravity_in_f0=False``
+    the ``-g Ts`` term is dropped: the input is then the thrust deviation from hover (erratum 8).
     """
-    gts = model.gravity_m_s2 * ts if gravity_in_f0 else 0.0
-    k = ts / model.mass_kg
-
-    def f0(x, ctx):
-        return [x[0] + ts * x[1], x[1] - gts, x[2] + ts * x[3], x[3]]
-
-    def f1_values(x, ctx):
-        return [k * ctx.cos_pitch * ctx.cos_roll, ts]
-
-    return AffineSubsystem("z_psi", 4, 2, f0, ((1, 0), (3, 1)), f1_values,
-                           np.asarray(Q, float), np.asarray(R, float), np.asarray(H, float))
+    zp = ZPsiModel(ts, model.mass_kg, model.gravity_m_s2, gravity_in_f0=gravity_in_f0)
+    return AffineSubsystem("z_psi", zp, *_weights(Q, R, H))
 
 
 def lateral_subsystem(axis: str, ts: float, model: ModelParams, Q, R, H) -> AffineSubsystem:
-    """y-phi (eq. 20) or x-theta in error coordinates, state [e_pos, e_vel, angle, rate], input tau.
+    """y-phi (eq. 20, :class:`gcs.model.YPhiModel`) or x-theta (:class:`gcs.model.XThetaModel`)
+    in error coordinates, state [e_pos, e_vel, angle, rate], input tau, with its weights.
 
-    The velocity row uses the thrust applied this step: ``+Ts u cos(theta) sin(phi) / m``
-    for y, ``-Ts u sin(theta) / m`` for x.
+    The velocity row uses the thrust applied this step (``ctx.thrust_n``).
     """
-    k = ts / model.mass_kg
-    if axis == "y_phi":
-        def f0(x, ctx):
-            return [x[0] + ts * x[1], x[1] + k * ctx.thrust_n * ctx.cos_pitch * ctx.sin_roll, x[2] + ts * x[3], x[3]]
-    elif axis == "x_theta":
-        def f0(x, ctx):
-            return [x[0] + ts * x[1], x[1] - k * ctx.thrust_n * ctx.sin_pitch, x[2] + ts * x[3], x[3]]
-    else:
+    models = {"y_phi": YPhiModel, "x_theta": XThetaModel}
+    if axis not in models:
         raise ValueError(f"axis must be 'y_phi' or 'x_theta', got {axis!r}")
-
-    def f1_values(x, ctx):
-        return [ts]
-
-    return AffineSubsystem(axis, 4, 1, f0, ((3, 0),), f1_values,
-                           np.asarray(Q, float), np.asarray(R, float), np.asarray(H, float))
+    return AffineSubsystem(axis, models[axis](ts, model.mass_kg), *_weights(Q, R, H))
 
 
 @dataclass(frozen=True)
@@ -207,23 +222,67 @@ class NlsocDesign:
     x_theta: AffineSubsystem
 
 
-def design_nlsoc(config: Config, model: ModelParams, *, gravity_compensated: bool = True) -> NlsocDesign:
-    """Resolve the matrices (corrected or printed, x-theta mirrored) and build the subsystems."""
+def design_nlsoc(ts_s: float, mass_kg: float, gravity_m_s2: float, weights: Mapping[str, tuple],
+                 horizon_steps: int, *, gravity_compensated: bool = True) -> NlsocDesign:
+    """The NLSOC subsystems: eq. 16 (z-psi) and eq. 20 (y-phi, x-theta) with their weights.
+
+    Parameters
+    ----------
+    ts_s : float
+        Sampling period [s].
+    mass_kg, gravity_m_s2 : float
+        The model's mass [kg] and gravity [m/s^2].
+    weights : mapping
+        ``{"z_psi": (Q, R, H), "y_phi": ..., "x_theta": ...}``: Q, H shape (4, 4); R shape
+        (2, 2) for z-psi, (1, 1) for the lateral subsystems.  Used as given (mirror the x-theta
+        ones beforehand, erratum 6: :func:`nlsoc_weights`).
+    horizon_steps : int
+        N (the law only needs to know the last step, j = 1).
+    gravity_compensated : bool
+        True: z-psi without the ``-g Ts`` term, the thrust law adds hover (erratum 8, ``nlsoc``);
+        False: the printed law (``nlsoc-literal``).
+
+    Returns
+    -------
+    NlsocDesign
+
+    Raises
+    ------
+    gcs.errors.DesignError
+        Wrong shapes, R not positive definite (message prefixed ``nlsoc.<subsystem>``).
+    """
+    model = ModelParams(mass_kg, gravity_m_s2)
+    try:
+        zp = z_psi_subsystem(ts_s, model, *weights["z_psi"], gravity_in_f0=not gravity_compensated)
+        yp = lateral_subsystem("y_phi", ts_s, model, *weights["y_phi"])
+        xt = lateral_subsystem("x_theta", ts_s, model, *weights["x_theta"])
+    except DesignError as exc:
+        raise DesignError(f"nlsoc.{exc}") from None
+    return NlsocDesign(ts_s, horizon_steps, gravity_compensated, zp, yp, xt)
+
+
+def nlsoc_weights(config: Config) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """``{subsystem: (Q, R, H)}`` of the config's NLSOC matrices in its matrix mode (corrected or
+    printed), the x-theta ones mirrored, ``S E S``, where the config asks for it (erratum 6)."""
     e = config.experiment
-    mats = {}
-    for name in ("z_psi", "y_phi", "x_theta"):
+    out = {}
+    for name in NLSOC_SUBSYSTEMS:
         ms = config.nlsoc[name]
         q, r, h = ms.resolved(e.matrices)
         if ms.mirror and e.matrices == "corrected":
             q, h = MIRROR @ q @ MIRROR, MIRROR @ h @ MIRROR
-        mats[name] = (q, r, h)
+        out[name] = (q, r, h)
+    return out
+
+
+def design_nlsoc_from_config(config: Config, *, gravity_compensated: bool = True) -> NlsocDesign:
+    """:func:`design_nlsoc` for ``config`` (its period, vehicle, :func:`nlsoc_weights` and horizon)."""
+    e, v = config.experiment, config.vehicle
     try:
-        zp = z_psi_subsystem(e.ts_s, model, *mats["z_psi"], gravity_in_f0=not gravity_compensated)
-        yp = lateral_subsystem("y_phi", e.ts_s, model, *mats["y_phi"])
-        xt = lateral_subsystem("x_theta", e.ts_s, model, *mats["x_theta"])
+        return design_nlsoc(e.ts_s, v.mass_kg, v.gravity_m_s2, nlsoc_weights(config), e.horizon_steps,
+                            gravity_compensated=gravity_compensated)
     except DesignError as exc:
-        raise DesignError(f"{config.source}: nlsoc.{exc}") from None
-    return NlsocDesign(e.ts_s, e.horizon_steps, gravity_compensated, zp, yp, xt)
+        raise DesignError(f"{config.source}: {exc}") from None
 
 
 class NlsocLaw(StagedLaw):
@@ -233,23 +292,20 @@ class NlsocLaw(StagedLaw):
         self.design = design
         self.model = model
         self.limits = limits
-        self._ctx = _Ctx()
+        self._ctx = AffineContext()
+        self._hover_n = model.hover_thrust_n if design.gravity_compensated else None
 
     def step_j(self, j: int, state: State, ref: State) -> Command:
         d = self.design
         ctx = self._ctx
         phi, th = state[6], state[7]
-        ctx.cos_roll, ctx.sin_roll = math.cos(phi), math.sin(phi)
-        ctx.cos_pitch, ctx.sin_pitch = math.cos(th), math.sin(th)
+        ctx.set_attitude(phi, th)
         ez = (state[2] - ref[2], state[5] - ref[5], wrap_angle(state[8] - ref[8]), state[11] - ref[11])
         du, t_yaw = d.z_psi.control(j, ez, ctx)
-        if d.gravity_compensated:
-            thrust = self.model.hover_thrust_n / tilt_cos(phi, th) + du
-        else:
-            thrust = du
+        # erratum 8: the compensated law's input is the thrust beyond hover
+        thrust = du if self._hover_n is None else self._hover_n / tilt_cos(phi, th) + du
         umax = self.limits.max_thrust_n
-        thrust = 0.0 if thrust < 0.0 else umax if thrust > umax else thrust
-        ctx.thrust_n = thrust
+        ctx.thrust_n = thrust = 0.0 if thrust < 0.0 else umax if thrust > umax else thrust
         ey = (state[1] - ref[1], state[4] - ref[4], phi, state[9])
         (t_roll,) = d.y_phi.control(j, ey, ctx)
         ex = (state[0] - ref[0], state[3] - ref[3], th, state[10])
@@ -258,9 +314,9 @@ class NlsocLaw(StagedLaw):
 
 
 def make_nlsoc(config: Config, model: ModelParams, limits: Limits, fallback: Controller | None,
-               *, gravity_compensated: bool = True) -> FiniteHorizonController:
-    """Design NLSOC for ``config`` and wrap it in its horizon schedule."""
-    design = design_nlsoc(config, model, gravity_compensated=gravity_compensated)
+               *, name: str = "nlsoc", gravity_compensated: bool = True) -> FiniteHorizonController:
+    """Design NLSOC for ``config`` and wrap it in its horizon schedule (``name`` and the gravity
+    handling come from the controller's :class:`gcs.control.registry.ControllerSpec`)."""
+    design = design_nlsoc_from_config(config, gravity_compensated=gravity_compensated)
     e = config.experiment
-    name = "nlsoc" if gravity_compensated else "nlsoc-literal"
     return FiniteHorizonController(name, NlsocLaw(design, model, limits), e.horizon_steps, e.after_horizon, fallback)

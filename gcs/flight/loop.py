@@ -1,593 +1,385 @@
-"""The vehicle-independent part of ``gcs fly``: the 100 Hz mission loop, failsafes, events, log, summary.
+"""The mission loop: one composition of parts, flown the same way on every vehicle and in ``gcs sim``.
 
-:class:`FlightLoop` flies a config's mission with one controller on one vehicle.
-What differs between vehicles — the link, telemetry decoding, preflight, the output
-message, how the flight ends — is in a subclass: :class:`gcs.flight.fly.Flight`
-(a MAVLink autopilot) and :class:`gcs.flight.rig.RigFlight` (the 4-DOF rig).  The
-loop calls these hooks:
+Parts: the clock (of the :class:`~gcs.flight.context.FlightContext`), the vehicle session
+(:class:`~gcs.flight.session.VehicleSession`: telemetry and estimate in, commands out), the
+mission reference (:class:`gcs.mission.Mission`), the controller, the safety envelope
+(optional), the flight log (the context's recorder) and the loop statistics (optional).
+Each tick runs on absolute deadlines of the clock (no drift): wait, pump the telemetry,
+estimate, failsafes and interrupts, reference, controller, envelope, send, record.
+Nothing here reads wall time except the per-stage timing of :class:`~gcs.flight.stats.LoopStats`.
 
-``_pump() -> int``
-    drain the link into the estimator (never blocks);
-``_fresh(now_ns, stale_s) -> bool``
-    telemetry newer than ``stale_s``;
-``_control_lost(t_s) -> str | None``
-    why the vehicle is no longer ours to steer (disarmed, another mode, cut off), or None;
-``_send_command(state, cmd)``
-    the limited command to the vehicle;
-``_housekeeping(k)``
-    once a second: heartbeats, round-trip probes;
-``_finish(reason)``
-    after the loop: land and disarm (or wait for the vehicle to), as ``reason`` asks;
-``_landed() -> bool``
-    for vehicles that do not land themselves (``lands_itself = False``): on the ground;
-``_link_summary() -> dict``
-    link counters for the summary.
-
-Each tick runs on absolute deadlines of the injected clock (no drift): drain the
-telemetry, predict the estimate, failsafes and interrupts, reference, controller,
-safety envelope, send, record.  In lockstep the clock is :class:`VehicleClock`, the
-vehicle's own time.
-
-Failsafes and exit codes (also in the summary as ``exit_reason``):
-
-====  =================  ==========================================================
-code  exit_reason        what happened
-====  =================  ==========================================================
-0     completed          mission flown, landed, disarmed
-3     telemetry_lost     telemetry older than ``telemetry_stale_s``: safe descent
-4     geofence           geofence or ceiling breached: landing
-5     interrupted        Ctrl-C / SIGTERM: controlled descent, landed, disarmed
-6     link_error         no heartbeat, port cannot be opened, link failed before flight
-7     preflight_refused  link budget, stale telemetry, battery, mode or arming refused
-8     immediate_land     a second Ctrl-C: land at once
-9     vehicle_took_over  the vehicle left our control (disarmed, another mode, the rig's
-                         cut-off): setpoints stop, the vehicle is left to itself
-10    unsafe_command     a non-finite or out-of-limit estimate or command was caught
-                         (never sent): a safe level command, then landing
-11    internal_error     an exception in the ground station while flying: landing
-12    telemetry_slow     the streams the controller flies on stayed too slow (after
-                         asking for them again): landing
-====  =================  ==========================================================
-
-Whatever ends the flight, the vehicle is landed and disarmed (or left to the pilot, 9),
-the parameters changed for the flight are restored and the log is finished.
+The exit reasons are :mod:`gcs.flight.result`'s; a failsafe ends the tick loop and the
+session's :meth:`~gcs.flight.session.VehicleSession.finish` lands as the reason asks.  Any
+exception while flying becomes ``internal_error``: the vehicle is landed, never abandoned.
 """
 
 from __future__ import annotations
 
-import math
-import signal
-import threading
 import time
 import traceback
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
-from gcs.config import Config, PhaseConfig
-from gcs.control import FiniteHorizonController, make_controller, model_params
-from gcs.control.base import horizon_mode
-from gcs.errors import GcsError
-from gcs.estimate import StateEstimator
-from quadrotor.clock import Clock
-from gcs.flight.recorder import FlightRecorder
-from gcs.log.flightlog import StageCost
-from gcs.flight.safety import EnvelopeLimits, SafetyEnvelope
+from gcs.config import PhaseConfig
+from gcs.control import FiniteHorizonController, model_params
+from gcs.control.base import Controller, horizon_mode
+from gcs.flight.context import FlightContext
+from gcs.flight.result import FlightResult
+from gcs.flight.safety import SafetyEnvelope
+from gcs.flight.session import VehicleSession, finite
 from gcs.flight.stats import LoopStats
-from gcs.link.guard import UnsafeCommand
-from gcs.link.mavlink import LinkError
+from gcs.log.records import LoopTiming
 from gcs.metrics import FlightRecord, controller_cost, flight_metrics
 from gcs.mission import Mission
 from quadrotor.state import Command, State
 
-__all__ = ["FlightLoop", "FlightResult", "VehicleClock", "Interrupts", "EXIT_CODES", "PreflightRefused"]
-
-EXIT_CODES = {"completed": 0, "telemetry_lost": 3, "geofence": 4, "interrupted": 5, "link_error": 6,
-              "preflight_refused": 7, "immediate_land": 8, "vehicle_took_over": 9, "unsafe_command": 10,
-              "internal_error": 11, "telemetry_slow": 12}
+__all__ = ["MissionLoop", "TOUCHDOWN_WAIT_S"]
 
 #: After the descent of a vehicle that does not land itself: how long to wait for touchdown [s].
 TOUCHDOWN_WAIT_S = 5.0
 
 
-class PreflightRefused(GcsError):
-    """A preflight check failed; the vehicle was not armed."""
-
-    exit_code = 7
-
-
 @dataclass
-class FlightResult:
-    """End-of-flight summary (see :meth:`to_json`)."""
+class _Track:
+    """What one flight accumulates tick by tick."""
 
-    controller: str
-    config: str
-    exit_reason: str
-    duration_s: float
-    metrics: dict
-    loop: dict
-    events: list = field(default_factory=list)
-    link: dict = field(default_factory=dict)
-    record: FlightRecord | None = None
-    log_path: str | None = None
-
-    @property
-    def exit_code(self) -> int:
-        return EXIT_CODES[self.exit_reason]
-
-    def to_json(self) -> dict:
-        return {"controller": self.controller, "config": self.config, "exit_reason": self.exit_reason,
-                "exit_code": self.exit_code, "duration_s": self.duration_s, "metrics": self.metrics,
-                "loop": self.loop, "events": self.events, "link": self.link, "log": self.log_path}
+    origin: tuple[float, float, float]
+    t0_ns: int
+    states: list = field(default_factory=list)
+    truths: list = field(default_factory=list)
+    refs: list = field(default_factory=list)
+    cmds: list = field(default_factory=list)
+    js: list = field(default_factory=list)
+    override: Mission | None = None
+    override_k0: int = 0
+    override_dz: float = 0.0
+    descent: bool = False
+    phase_idx: int = -1
+    handled_interrupts: int = 0
+    next_live_s: float = 0.0
+    log_prev_ns: int = 0
+    last_cmd: Command | None = None
 
 
-class VehicleClock:
-    """Lockstep clock: the vehicle's own time (the time stamps of its telemetry).
+class MissionLoop:
+    """Fly ``config``'s mission with ``controller`` on ``session``.
 
     Parameters
     ----------
-    vehicle_time_ns : callable () -> int
-        The newest vehicle time stamp received [ns].
-    pump : callable (wait_s)
-        Receive from the link, waiting at most ``wait_s`` when nothing is there.
-    max_wait_s : float
-        Wall time to wait for a step's telemetry before giving up on it.
-    lost_wait_s : float
-        The same after a step whose telemetry never came, until telemetry comes again.
-
-    After :meth:`mark_sent`, ``sleep_until_ns`` pumps the link until telemetry newer
-    than the command has arrived (the vehicle steps once per command; an absolute time
-    would never be reached after a lost frame).  Wall time enters only when that telemetry
-    does not come: after ``max_wait_s`` (long enough that a simulator starved of CPU is
-    waited for, so the same seed gives the same flight) the clock moves to the deadline
-    anyway, and while nothing comes back each step waits only ``lost_wait_s`` — a silent
-    vehicle still ages the telemetry quickly and trips the failsafe.  :attr:`timeouts`
-    counts the steps given up on (a flight with none did not depend on wall time).
-    """
-
-    def __init__(self, vehicle_time_ns: Callable[[], int], pump: Callable[[float], None],
-                 max_wait_s: float = 0.5, lost_wait_s: float = 0.05) -> None:
-        self.vehicle_time_ns = vehicle_time_ns
-        self.pump = pump
-        self.max_wait_s = max_wait_s
-        self.lost_wait_s = lost_wait_s
-        self._virtual_ns = 0
-        self._sent_ns: int | None = None
-        self._lost = False
-        self.timeouts = 0
-
-    def now_ns(self) -> int:
-        return max(self.vehicle_time_ns(), self._virtual_ns)
-
-    def mark_sent(self) -> None:
-        """A command went out: the next tick waits for telemetry newer than now."""
-        self._sent_ns = self.vehicle_time_ns()
-
-    def sleep_until_ns(self, deadline_ns: int) -> None:
-        sent = self._sent_ns
-        end = time.monotonic() + (self.lost_wait_s if self._lost else self.max_wait_s)
-        while (self.vehicle_time_ns() <= sent) if sent is not None else (self.now_ns() < deadline_ns):
-            remaining = end - time.monotonic()
-            if remaining <= 0:
-                self.timeouts += 1
-                self._lost = True
-                break
-            self.pump(min(remaining, 0.005))
-        else:
-            self._lost = False
-        self._virtual_ns = max(self._virtual_ns, deadline_ns)
-
-
-class Interrupts:
-    """SIGINT/SIGTERM -> a count (first: controlled landing, second: immediate landing)."""
-
-    def __init__(self) -> None:
-        self.count = 0
-        self._old: dict = {}
-
-    def __enter__(self) -> "Interrupts":
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                self._old[sig] = signal.signal(sig, self._handle)
-        return self
-
-    def _handle(self, signum, frame) -> None:
-        self.count += 1
-
-    def __exit__(self, *exc) -> None:
-        for sig, old in self._old.items():
-            signal.signal(sig, old)
-
-
-class FlightLoop:
-    """The mission loop of one flight of ``controller`` on ``config`` (subclassed per vehicle).
-
-    Parameters
-    ----------
-    config : Config
-    controller : str
-        One of :data:`gcs.control.CONTROLLERS`.
-    estimator : StateEstimator
-        Fed by the subclass's telemetry.
-    clock : Clock or None
-        The loop's clock in real time; None = lockstep (the subclass sets :attr:`clock`
-        to a :class:`VehicleClock` of its vehicle).
-    console : callable (str) or None
-        Where the pilot's lines go.
+    ctx : FlightContext
+    controller_name : str
+    controller : Controller
+        Designed; stepped ``controller.step(k, state, reference)``.
+    session : VehicleSession
+    envelope : SafetyEnvelope or None
+        Limits, tilt guard and geofence (None: the command goes as the controller gave it).
+    stats : bool
+        Keep per-stage timing and deadline statistics (the simulation does not need them).
+    duration_s : float or None
+        How long the mission's references are flown; None = the mission's own length.
     live_period_s : float
-        Period of the live altitude/error line [s].
-    interrupts : Interrupts or None
-    recorder : FlightRecorder or None
-        The flight log (None: no log).
+        Period of the console's live line [s] (0 = none).
+    close_at_end_time : bool
+        Close the flight record (the J terminal term) with the mission's reference at the end
+        time, as ``gcs sim`` always has; False: with the last reference flown, as ``gcs fly``
+        always has (both kept so that the published tables do not move).
     """
 
-    #: The vehicle lands itself once told to (MAVLink LAND); False: the loop flies the descent
-    #: to the ground and :meth:`_finish` disarms.
-    lands_itself = True
-    #: What the vehicle leaves when it stops taking our setpoints (for the failsafe message).
-    control_name = "ground-station control"
-
-    def __init__(self, config: Config, controller: str, estimator: StateEstimator, clock: Clock | None, *,
-                 console: Callable[[str], None] | None = None, live_period_s: float = 0.5,
-                 interrupts: Interrupts | None = None, recorder: FlightRecorder | None = None) -> None:
-        self.config = config
-        self.controller_name = controller
-        self.flight_cfg = config.flight
-        self.console = console or (lambda s: None)
-        self.live_period_s = live_period_s
-        self.events: list[dict] = []
-        self.interrupts = interrupts or Interrupts()
-        self.recorder = recorder or FlightRecorder(None)
-        if self.recorder.warn is None:
-            self.recorder.warn = lambda text: self.event("warning", text)
+    def __init__(self, ctx: FlightContext, controller_name: str, controller: Controller, session: VehicleSession, *,
+                 envelope: SafetyEnvelope | None = None, stats: bool = True, duration_s: float | None = None,
+                 live_period_s: float = 0.5, close_at_end_time: bool = False) -> None:
+        config = ctx.config
         e = config.experiment
+        self.ctx = ctx
+        self.config = config
+        self.controller_name = controller_name
+        self.controller = controller
+        self.session = session
+        self.envelope = envelope
+        self.ts = e.ts_s
         self.ts_ns = int(round(e.ts_s * 1e9))
+        self.ticks_per_second = max(1, int(round(1.0 / e.ts_s)))
+        self.mission = Mission(config.mission, zero_velocity=e.zero_velocity_reference)
+        self.duration_s = self.mission.duration_s if duration_s is None else duration_s
+        self.mission_steps = int(round(self.duration_s / e.ts_s))
+        self.stats = LoopStats(self.ts_ns) if stats else None
+        self.live_period_s = live_period_s
+        self.close_at_end_time = close_at_end_time
         self.model = model_params(config)
-        self.estimator = estimator
-        self.lockstep = clock is None
-        self.clock: Clock = clock  # type: ignore[assignment]  # the subclass sets the lockstep clock
-        self.stats = LoopStats(self.ts_ns)
-        fc = config.flight
-        self.envelope = SafetyEnvelope(EnvelopeLimits(
-            max_thrust_n=config.vehicle.max_thrust_n, max_angular_accel_rad_s2=config.vehicle.max_angular_accel_rad_s2,
-            max_tilt_rad=math.radians(fc.max_tilt_deg), fence_half_width_m=fc.fence_half_width_m,
-            ceiling_m=fc.ceiling_m, level_kp=config.pd.kp_phi, level_kd=config.pd.kd_phi))
-        self.controller = make_controller(controller, config)
-        self._last_cmd: Command | None = None
+        self.cost = controller_cost(controller_name, config)
+        self.horizon = controller if isinstance(controller, FiniteHorizonController) else None
         self._limit_flags_seen: set[str] = set()
+        self._tap: Any = None
+        #: A vehicle that can fail (link, mode, streams) is checked every tick; a simulated one need not be.
+        self._supervised = getattr(session, "supervised", True)
 
-    # ------------------------------------------------------------------ events
-    def now_ns(self) -> int:
-        return self.clock.now_ns() if self.clock is not None else 0
+    # ------------------------------------------------------------------ the flight
+    def run(self, tap: Callable[[_Track], Any] | None = None) -> FlightResult:
+        """Fly the mission (preflight must have passed) and land; returns the summary.
 
-    def event(self, kind: str, text: str, **fields) -> None:
-        """Record (summary and log) and print an event."""
-        t = self.now_ns()
-        self.events.append({"t_ns": t, "kind": kind, "text": text, **fields})
-        self.recorder.event(t, kind, text, **fields)
-        self.console(f"[{kind}] {text}")
-
-    # ------------------------------------------------------------------ the link
-    # A subclass sets ``self.link`` (``drain()``, ``send(msg)``, ``wait_readable(s)``; raising
-    # LinkError) and implements ``_handle(msg)``.
-    link: object
-    _link_down = False
-    _last_rx_wall = 0.0
-
-    def _handle(self, msg) -> None:
-        raise NotImplementedError
-
-    def _pump(self) -> int:
-        """Drain the link into the telemetry (never blocks); the number of messages."""
-        try:
-            msgs = self.link.drain()  # type: ignore[attr-defined]
-        except LinkError as exc:
-            self._link_failed(exc)
-            return 0
-        for m in msgs:
-            self._handle(m)
-        if msgs:
-            self._last_rx_wall = time.monotonic()
-        return len(msgs)
-
-    def _pump_wait(self, wait_s: float) -> None:
-        """Pump; when nothing was there, wait up to ``wait_s`` for bytes."""
-        if self._pump() == 0:
-            self.link.wait_readable(wait_s)  # type: ignore[attr-defined]
-
-    def _link_failed(self, exc: Exception) -> None:
-        """A dead link shows as stale telemetry (the failsafe acts); said once."""
-        if not self._link_down:
-            self._link_down = True
-            self.event("warning", f"link failure: {exc}")
-
-    #: Set when the output guard blocked a command: ``(exit_reason, text)``; the loop fails safe.
-    fault: tuple[str, str] | None = None
-    #: () -> why the vehicle process is gone (a child simulator that exited), or None.
-    vehicle_alive: Callable[[], str | None] | None = None
-
-    def _send(self, msg) -> None:
-        try:
-            self.link.send(msg)  # type: ignore[attr-defined]
-        except UnsafeCommand as exc:
-            self._unsafe(str(exc))
-        except LinkError as exc:
-            self._link_failed(exc)
-
-    def _unsafe(self, why: str) -> None:
-        """A command was blocked before the wire: send the safe one instead, and fail safe (once)."""
-        first = self.fault is None
-        if first:
-            self.fault = ("unsafe_command", why)
-            self.event("failsafe", f"output guard blocked a command ({why}): safe level command, landing")
-        try:
-            self.link.send(self._safe_command())  # type: ignore[attr-defined]
-        except (UnsafeCommand, LinkError) as exc:
-            if first:
-                self.event("warning", f"the safe command could not be sent either: {exc}")
-
-    def _safe_command(self):
-        """A level command below hover thrust for this vehicle (what a blocked command is replaced by)."""
-        raise NotImplementedError
-
-    def _vehicle_gone(self) -> str | None:
-        if self.vehicle_alive is None:
-            return None
-        return self.vehicle_alive()
-
-    # ------------------------------------------------------------------ hooks
-
-    def _fresh(self, now_ns: int, stale_s: float) -> bool:
-        raise NotImplementedError
-
-    def _control_lost(self, t_s: float) -> str | None:
-        raise NotImplementedError
-
-    def _send_command(self, state: State, cmd: Command) -> None:
-        raise NotImplementedError
-
-    def _housekeeping(self, k: int) -> None:
-        """Once a second during the mission (nothing by default)."""
-
-    def _finish(self, reason: str) -> None:
-        raise NotImplementedError
-
-    def _landed(self) -> bool:
-        return False
-
-    def _abandon(self) -> None:
-        """The last resort when landing raised: whatever gets the vehicle's own failsafe to land it."""
-
-    def _health(self, now_ns: int) -> tuple[str, str] | None:
-        """Once a tick: a failsafe ``(exit_reason, text)`` the vehicle's link calls for (slow streams), or None."""
-        return None
-
-    def _mission_origin(self, state: State) -> tuple[float, float, float]:
-        """Where the mission's (0, 0, 0) is: the takeoff point (a real autopilot's local origin need not
-        be where the vehicle stands)."""
-        return (state.x, state.y, state.z)
-
-    def _link_summary(self) -> dict:
-        return {}
-
-    def restore_params(self) -> None:
-        """Put back what was changed on the vehicle for the flight (nothing by default)."""
-
-    def emergency_land(self) -> None:
-        """Land from wherever the flight stands (an exception escaped the flight): the usual landing."""
-        self._finish("internal_error")
-
-    # ------------------------------------------------------------------ the mission
-    def _landing_mission(self, from_z: float, to_z: float) -> tuple[Mission, float]:
-        """A descent from the current position to ``to_z`` at ``landing_speed_m_s``, and the z offset
-        to add to its references (the mission lands at 0: it is flown relative to ``to_z``)."""
-        ts = self.config.experiment.ts_s
-        height = max(from_z - to_z, 1e-3)
-        duration = max(height / self.flight_cfg.landing_speed_m_s, ts)
-        s = self.estimator.state()
-        return Mission([PhaseConfig("takeoff", ts, z_m=height), PhaseConfig("land", duration)],
-                       start=(s.x, s.y, height)), to_z
-
-    def run_mission(self) -> FlightResult:
-        """Fly the mission (preflight must have passed) and land; returns the summary."""
-        e = self.config.experiment
-        mission = Mission(self.config.mission, zero_velocity=e.zero_velocity_reference)
-        override: Mission | None = None
-        override_k0 = 0
-        override_dz = 0.0
-        horizon = self.controller if isinstance(self.controller, FiniteHorizonController) else None
-        h_steps = horizon.horizon_steps if horizon is not None else None
-        h_after = horizon.after if horizon is not None else None
-        states, refs, cmds, js = [], [], [], []
-        stale_s = self.flight_cfg.telemetry_stale_s
-        reason = "completed"
-        ts_ns = self.ts_ns
-        rec = self.recorder
-        t0 = self.clock.now_ns()
-        # The mission is flown relative to where the vehicle stands at its start (the local
-        # origin of a real autopilot need not be the takeoff point).
-        origin = self._mission_origin(self.estimator.state())
-        self.envelope.origin = origin
-        cost = controller_cost(self.controller_name, self.config)
-        mission_steps = int(round(mission.duration_s / e.ts_s))
-        rec.flight_start(t0, controller=self.controller_name, experiment=e.name, ts_s=e.ts_s, steps=mission_steps,
-                         cost=StageCost.spec_of(cost, self.model.mass_kg, self.model.gravity_m_s2) if cost else None,
-                         origin_m=list(origin))
-        self.event("phase", f"takeoff point (x {origin[0]:.2f}, y {origin[1]:.2f}, z {origin[2]:.2f}) m")
-        next_live = 0.0
-        phase_idx = -1
-        k = 0
-        handled_interrupts = 0
-        descent = False  # the end-of-mission descent of a vehicle that does not land itself
-        self.event("phase", f"mission start: {len(self.config.mission)} phases, {mission.duration_s:g} s")
+        ``tap(track)``, when given, returns an object told ``tick(estimate)`` after every tick and
+        ``finish(metrics)`` at the end, sharing the flight's lists (the simulation's block log).
+        """
+        track = self._begin()
+        self._tap = tap(track) if tap is not None else None
         wall0 = time.perf_counter()
-        log_prev_ns = 0
         try:
-            while True:
-                deadline = t0 + k * ts_ns
-                self.clock.sleep_until_ns(deadline)
-                wake = self.clock.now_ns()
-                late = wake - deadline
-                if late >= ts_ns and not self.lockstep:
-                    self.stats.skipped_ticks += int(late // ts_ns)
-                c0 = time.perf_counter_ns()
-                self._pump()
-                c1 = time.perf_counter_ns()
-                self.estimator.predict(e.ts_s, self._last_cmd)
-                state = self.estimator.state()
-                c2 = time.perf_counter_ns()
-                t = k * e.ts_s
-                # --- failsafes and interrupts
-                gone = self._vehicle_gone() if k % 10 == 0 else None
-                if gone is not None:
-                    reason = "link_error"
-                    self.event("failsafe", f"{gone} at t = {t:.2f} s")
-                    break
-                if self.fault is not None:
-                    reason = self.fault[0]
-                    break
-                if not self._fresh(wake, stale_s):
-                    reason = "telemetry_lost"
-                    self.event("failsafe", f"telemetry stale for more than {stale_s:g} s at t = {t:.2f} s: landing")
-                    break
-                health = self._health(wake)
-                if health is not None:
-                    reason = health[0]
-                    self.event("failsafe", f"{health[1]} at t = {t:.2f} s: landing")
-                    break
-                if not all(math.isfinite(v) for v in state):
-                    reason = "unsafe_command"
-                    self.event("failsafe", f"the state estimate is not finite at t = {t:.2f} s: landing")
-                    break
-                breach = self.envelope.breaches(state)
-                if breach:
-                    reason = "geofence"
-                    self.event("failsafe", f"{', '.join(sorted(breach))} breached at t = {t:.2f} s "
-                                           f"(x {state.x:.2f}, y {state.y:.2f}, z {state.z:.2f} m): landing")
-                    break
-                lost = self._control_lost(t)
-                if lost is not None:
-                    reason = "vehicle_took_over"
-                    self.event("failsafe", f"the vehicle left {self.control_name} at t = {t:.2f} s ({lost}): stopping setpoints")
-                    break
-                if self.interrupts.count > handled_interrupts:
-                    handled_interrupts = self.interrupts.count
-                    if handled_interrupts >= 2:
-                        reason = "immediate_land"
-                        self.event("failsafe", "second interrupt: landing now")
-                        break
-                    reason = "interrupted"
-                    override, override_dz = self._landing_mission(state.z, origin[2])
-                    override_k0 = k
-                    self.event("interrupt", f"interrupted at t = {t:.2f} s: controlled descent from z = {state.z:.2f} m "
-                                            f"at {self.flight_cfg.landing_speed_m_s:g} m/s")
-                if override is None and t >= mission.duration_s:
-                    if self.lands_itself:
-                        break
-                    descent = True
-                    override, override_dz = self._landing_mission(state.z, origin[2])
-                    override_k0 = k
-                    self.event("phase", f"mission over at t = {t:.2f} s: descent from z = {state.z:.2f} m "
-                                        f"at {self.flight_cfg.landing_speed_m_s:g} m/s")
-                if override is not None:
-                    tm = (k - override_k0) * e.ts_s
-                    if tm >= override.duration_s and (
-                            self.lands_itself or self._landed() or tm >= override.duration_s + TOUCHDOWN_WAIT_S):
-                        break
-                    r = override.reference(min(tm, override.duration_s))  # x, y from the estimate: absolute
-                    ref = r._replace(z=r.z + override_dz)
-                else:
-                    seg = mission.segment_at(t)
-                    if seg is not None and seg.index != phase_idx:
-                        phase_idx = seg.index
-                        self.event("phase", f"{seg.phase.kind} ({seg.phase.duration_s:g} s) at t = {t:.2f} s",
-                                   phase=seg.phase.kind, index=seg.index)
-                    r = mission.reference(t)
-                    ref = r._replace(x=r.x + origin[0], y=r.y + origin[1], z=r.z + origin[2])
-                # --- control, envelope, output
-                raw = self.controller.step(k, state, ref)
-                cmd, flags = self.envelope.apply(state, raw)
-                if "non-finite" in flags:
-                    reason = "unsafe_command"
-                    self.event("failsafe", f"{self.controller_name} commanded a non-finite value at t = {t:.2f} s "
-                                           f"({tuple(raw)}): not sent, landing")
-                    break
-                for f in flags - self._limit_flags_seen:
-                    self.event("warning", f"{f} limit acting at t = {t:.2f} s")
-                self._limit_flags_seen |= flags
-                c3 = time.perf_counter_ns()
-                self._send_command(state, cmd)
-                if isinstance(self.clock, VehicleClock):
-                    self.clock.mark_sent()
-                if self.fault is not None:
-                    reason = self.fault[0]
-                    break
-                c4 = time.perf_counter_ns()
-                j = (horizon.last_steps_to_go or 0) if horizon is not None else 0
-                if rec.sink is not None:
-                    rec.tick(wake, k, state, ref, raw, cmd, j, horizon_mode(k, h_steps, h_after),
-                             (late / 1e9, (c4 - c0) / 1e9, late >= ts_ns, (c1 - c0) / 1e9, (c2 - c1) / 1e9,
-                              (c3 - c2) / 1e9, (c4 - c3) / 1e9, log_prev_ns / 1e9))
-                c5 = time.perf_counter_ns()
-                log_prev_ns = c5 - c4
-                self.stats.record(late, {"decode": c1 - c0, "estimate": c2 - c1, "control": c3 - c2, "send": c4 - c3,
-                                         "log": log_prev_ns})
-                self._last_cmd = cmd
-                states.append(state)
-                refs.append(ref)
-                cmds.append(cmd)
-                js.append(j)
-                if k % 100 == 0:  # once a second: the ground station is alive, and how late is the link
-                    self._housekeeping(k)
-                if t >= next_live:
-                    next_live = t + self.live_period_s
-                    self.console(f"t {t:7.2f} s  z {state.z:6.3f} m  ref {ref.z:6.3f} m  err {ref.z - state.z:+.3f} m  "
-                                 f"xy ({state.x:+.2f}, {state.y:+.2f}) m  thrust {cmd.thrust_n:5.2f} N")
-                k += 1
-                if not self.lockstep and late >= ts_ns:
-                    k += int(late // ts_ns)
+            reason = self._fly(track)
         except Exception as exc:  # noqa: BLE001 - any failure while flying must end in a landing, never an abandoned vehicle
             reason = "internal_error"
-            self.event("failsafe", f"internal error at t = {k * e.ts_s:.2f} s ({type(exc).__name__}: {exc}): landing",
-                       traceback=traceback.format_exc())
-        wall_s = time.perf_counter() - wall0
-        end_state = self.estimator.state()
-        t_end = self.clock.now_ns()
-        if cmds:
-            rec.flight_end(t_end, end_state, refs[-1])
-        if descent and reason == "completed":
-            self.event("phase", "on the ground" if self._landed() else
-                       f"not on the ground {TOUCHDOWN_WAIT_S:g} s after the descent")
+            self.ctx.event("failsafe", f"internal error at t = {len(track.cmds) * self.ts:.2f} s "
+                                       f"({type(exc).__name__}: {exc}): landing", traceback=traceback.format_exc())
+        return self._end(track, reason, time.perf_counter() - wall0)
+
+    def _begin(self) -> _Track:
+        ctx, e = self.ctx, self.config.experiment
+        t0 = ctx.clock.now_ns()
+        # The mission is flown relative to where the vehicle stands at its start (the local
+        # origin of a real autopilot need not be the takeoff point).
+        origin = self.session.mission_origin(self.session.estimate(0.0, None))
+        if self.envelope is not None:
+            self.envelope.origin = origin
+        rec = ctx.recorder
+        rec.flight_start(t0, controller=self.controller_name, experiment=e.name, ts_s=e.ts_s, steps=self.mission_steps,
+                         cost=self.cost.to_dict(self.model.mass_kg, self.model.gravity_m_s2)
+                         if self.cost else None, origin_m=list(origin))
+        ctx.event("phase", f"takeoff point (x {origin[0]:.2f}, y {origin[1]:.2f}, z {origin[2]:.2f}) m")
+        ctx.event("phase", f"mission start: {len(self.config.mission)} phases, {self.mission.duration_s:g} s")
+        return _Track(origin=origin, t0_ns=t0)
+
+    def _fly(self, tr: _Track) -> str:
+        """The tick loop; returns the exit reason."""
+        clock, session, ts_ns = self.ctx.clock, self.session, self.ts_ns
+        mark = getattr(clock, "mark_sent", None)
+        lockstep = self.ctx.lockstep
+        k = 0
+        while True:
+            deadline = tr.t0_ns + k * ts_ns
+            clock.sleep_until_ns(deadline)
+            wake = clock.now_ns()
+            late = wake - deadline
+            c0 = time.perf_counter_ns() if self.stats is not None else 0
+            session.pump()
+            c1 = time.perf_counter_ns() if self.stats is not None else 0
+            state = session.estimate(self.ts, tr.last_cmd)
+            truth = session.truth()
+            c2 = time.perf_counter_ns() if self.stats is not None else 0
+            t = k * self.ts
+            reason = self._failsafe(k, t, wake, state, tr)
+            if reason is not None:
+                return reason
+            ref = self._reference(k, t, state, tr)
+            if ref is None:
+                return "interrupted" if tr.handled_interrupts else "completed"
+            raw = self.controller.step(k, state, ref)
+            cmd, reason = self._limit(t, state, raw)
+            if reason is not None:
+                return reason
+            c3 = time.perf_counter_ns() if self.stats is not None else 0
+            session.send(state, cmd)
+            if mark is not None:
+                mark()
+            c4 = time.perf_counter_ns() if self.stats is not None else 0
+            fault = session.fault()
+            if fault is not None:  # the output guard blocked the command (a safe one went instead)
+                return fault[0]
+            self._record(k, wake, late, state, truth, ref, raw, cmd, tr, (c0, c1, c2, c3, c4))
+            if k % self.ticks_per_second == 0:
+                session.housekeeping()
+            if self.live_period_s and t >= tr.next_live_s:
+                tr.next_live_s = t + self.live_period_s
+                self.ctx.console(f"t {t:7.2f} s  z {state.z:6.3f} m  ref {ref.z:6.3f} m  err {ref.z - state.z:+.3f} m  "
+                                 f"xy ({state.x:+.2f}, {state.y:+.2f}) m  thrust {cmd.thrust_n:5.2f} N")
+            k += 1
+            if not lockstep and late >= ts_ns:
+                skipped = int(late // ts_ns)
+                k += skipped
+                if self.stats is not None:
+                    self.stats.skipped_ticks += skipped
+
+    def _failsafe(self, k: int, t: float, wake: int, state: State, tr: _Track) -> str | None:
+        """The checks of one tick, in order; an exit reason (said as an event) or None."""
+        ctx, session, stale_s = self.ctx, self.session, self.config.flight.telemetry_stale_s
+        if not self._supervised:
+            return self._interrupted(k, t, state, tr)
+        fault = session.fault()
+        if fault is not None:
+            if fault[1]:
+                ctx.event("failsafe", f"{fault[1]} at t = {t:.2f} s")
+            return fault[0]
+        if not session.fresh(wake, stale_s):
+            ctx.event("failsafe", f"telemetry stale for more than {stale_s:g} s at t = {t:.2f} s: landing")
+            return "telemetry_lost"
+        health = session.health(wake)
+        if health is not None:
+            ctx.event("failsafe", f"{health[1]} at t = {t:.2f} s: landing")
+            return health[0]
+        if not finite(state):
+            ctx.event("failsafe", f"the state estimate is not finite at t = {t:.2f} s: landing")
+            return "unsafe_command"
+        if self.envelope is not None:
+            breach = self.envelope.breaches(state)
+            if breach:
+                ctx.event("failsafe", f"{', '.join(sorted(breach))} breached at t = {t:.2f} s "
+                                      f"(x {state.x:.2f}, y {state.y:.2f}, z {state.z:.2f} m): landing")
+                return "geofence"
+        lost = session.control_lost()
+        if lost is not None:
+            ctx.event("failsafe", f"the vehicle left {session.control_name} at t = {t:.2f} s ({lost}): stopping setpoints")
+            return "vehicle_took_over"
+        return self._interrupted(k, t, state, tr)
+
+    def _interrupted(self, k: int, t: float, state: State, tr: _Track) -> str | None:
+        """Ctrl-C: the first one flies a controlled descent, the second lands at once."""
+        ctx = self.ctx
+        count = ctx.interrupts.count
+        if count > tr.handled_interrupts:
+            tr.handled_interrupts = count
+            if count >= 2:
+                ctx.event("failsafe", "second interrupt: landing now")
+                return "immediate_land"
+            tr.override, tr.override_dz = self._landing_mission(state, tr.origin[2])
+            tr.override_k0 = k
+            ctx.event("interrupt", f"interrupted at t = {t:.2f} s: controlled descent from z = {state.z:.2f} m "
+                                   f"at {self.config.flight.landing_speed_m_s:g} m/s")
+        return None
+
+    def _reference(self, k: int, t: float, state: State, tr: _Track) -> State | None:
+        """This tick's reference, or None when the flight is over (mission flown, descent done)."""
+        if tr.override is None and t >= self.duration_s:
+            if self.session.lands_itself:
+                return None
+            tr.descent = True
+            tr.override, tr.override_dz = self._landing_mission(state, tr.origin[2])
+            tr.override_k0 = k
+            self.ctx.event("phase", f"mission over at t = {t:.2f} s: descent from z = {state.z:.2f} m "
+                                    f"at {self.config.flight.landing_speed_m_s:g} m/s")
+        if tr.override is not None:
+            tm = (k - tr.override_k0) * self.ts
+            if tm >= tr.override.duration_s and (self.session.lands_itself or self.session.landed()
+                                                 or tm >= tr.override.duration_s + TOUCHDOWN_WAIT_S):
+                return None
+            r = tr.override.reference(min(tm, tr.override.duration_s))  # x, y from the estimate: absolute
+            return r._replace(z=r.z + tr.override_dz)
+        seg = self.mission.segment_at(t)
+        if seg is not None and seg.index != tr.phase_idx:
+            tr.phase_idx = seg.index
+            self.ctx.event("phase", f"{seg.phase.kind} ({seg.phase.duration_s:g} s) at t = {t:.2f} s",
+                           phase=seg.phase.kind, index=seg.index)
+        r = self.mission.reference(t)
+        ox, oy, oz = tr.origin
+        return r if ox == oy == oz == 0.0 else r._replace(x=r.x + ox, y=r.y + oy, z=r.z + oz)
+
+    def _limit(self, t: float, state: State, raw: Command) -> tuple[Command, str | None]:
+        """The command after the envelope, or the exit reason of a non-finite one (never sent)."""
+        if self.envelope is None:
+            if not finite(raw):
+                self.ctx.event("failsafe", f"{self.controller_name} commanded a non-finite value at t = {t:.2f} s "
+                                           f"({tuple(raw)}): not sent, landing")
+                return raw, "unsafe_command"
+            return raw, None
+        cmd, flags = self.envelope.apply(state, raw)
+        if "non-finite" in flags:
+            self.ctx.event("failsafe", f"{self.controller_name} commanded a non-finite value at t = {t:.2f} s "
+                                       f"({tuple(raw)}): not sent, landing")
+            return cmd, "unsafe_command"
+        for f in flags - self._limit_flags_seen:
+            self.ctx.event("warning", f"{f} limit acting at t = {t:.2f} s")
+        self._limit_flags_seen |= flags
+        return cmd, None
+
+    def _record(self, k: int, wake: int, late: int, state: State, truth: State | None, ref: State, raw: Command,
+                cmd: Command, tr: _Track, c: tuple[int, int, int, int, int]) -> None:
+        h = self.horizon
+        j = (h.last_steps_to_go or 0) if h is not None else 0
+        rec = self.ctx.recorder
+        if rec.sink is not None:
+            c0, c1, c2, c3, c4 = c
+            rec.tick(wake, k, state, ref, raw, cmd, j,
+                     horizon_mode(k, h.horizon_steps if h else None, h.after if h else None),
+                     LoopTiming(late / 1e9, (c4 - c0) / 1e9, late >= self.ts_ns, (c1 - c0) / 1e9, (c2 - c1) / 1e9,
+                                (c3 - c2) / 1e9, (c4 - c3) / 1e9, tr.log_prev_ns / 1e9))
+        if self.stats is not None:
+            c0, c1, c2, c3, c4 = c
+            c5 = time.perf_counter_ns()
+            tr.log_prev_ns = c5 - c4
+            self.stats.record(late, {"decode": c1 - c0, "estimate": c2 - c1, "control": c3 - c2, "send": c4 - c3,
+                                     "log": tr.log_prev_ns})
+        tr.last_cmd = cmd
+        tr.states.append(state)
+        if truth is not None:
+            tr.truths.append(truth)
+        tr.refs.append(ref)
+        tr.cmds.append(cmd)
+        tr.js.append(j)
+        if self._tap is not None:
+            self._tap.tick(state)
+
+    def _landing_mission(self, s: State, to_z: float) -> tuple[Mission, float]:
+        """A descent from the current position ``s`` to ``to_z`` at ``landing_speed_m_s``, and the z offset
+        to add to its references (the mission lands at 0: it is flown relative to ``to_z``)."""
+        height = max(s.z - to_z, 1e-3)
+        duration = max(height / self.config.flight.landing_speed_m_s, self.ts)
+        return Mission([PhaseConfig("takeoff", self.ts, z_m=height), PhaseConfig("land", duration)],
+                       start=(s.x, s.y, height)), to_z
+
+    # ------------------------------------------------------------------ after the loop
+    def _end(self, tr: _Track, reason: str, wall_s: float) -> FlightResult:
+        ctx, e, session = self.ctx, self.config.experiment, self.session
+        end_state = session.estimate(0.0, None)
+        end_truth = session.truth()
+        t_end = ctx.clock.now_ns()
+        if tr.cmds:
+            ctx.recorder.flight_end(t_end, end_state, tr.refs[-1])
+        if tr.descent and reason == "completed":
+            ctx.event("phase", "on the ground" if session.landed() else
+                      f"not on the ground {TOUCHDOWN_WAIT_S:g} s after the descent")
         try:
-            self._finish(reason)
+            session.finish(reason)
         except Exception as exc:  # noqa: BLE001 - the landing itself failed: the vehicle's own failsafes are left
-            self.event("failsafe", f"landing failed ({type(exc).__name__}: {exc}); the vehicle's own failsafe "
-                                   "must bring it down", traceback=traceback.format_exc())
-            self._abandon()
-        record = None
-        metrics: dict = {}
-        if cmds:
-            states.append(end_state)
-            refs.append(refs[-1])
-            n = min(len(cmds), mission_steps)  # a descent flown after the mission is logged, not measured
-            record = FlightRecord(e.ts_s, np.array(states[:n + 1], float), np.array(refs[:n + 1], float),
-                                  np.array(cmds[:n], float), np.array(js[:n], dtype=np.int64))
-            try:
-                metrics = flight_metrics(record, self.config, mission, cost)
-            except (ValueError, FloatingPointError) as exc:
-                self.event("warning", f"metrics not computed: {exc}")
-                metrics = {}
-            rec.flight_metrics(self.now_ns(), metrics)
-        self.event("flight_end", f"{self.controller_name}: {reason} after {len(cmds) * e.ts_s:.2f} s",
-                   exit_reason=reason)
-        loop = self.stats.summary()
+            ctx.event("failsafe", f"landing failed ({type(exc).__name__}: {exc}); the vehicle's own failsafe "
+                                  "must bring it down", traceback=traceback.format_exc())
+            session.abandon()
+        record, metrics = self._metrics(tr, end_truth if end_truth is not None else end_state)
+        n_flown = len(tr.cmds)
+        ctx.event("flight_end", f"{self.controller_name}: {reason} after {n_flown * e.ts_s:.2f} s", exit_reason=reason)
+        loop = self.stats.summary() if self.stats is not None else {"ticks": n_flown}
         loop["wall_s"] = wall_s
-        loop["realtime_ratio"] = len(cmds) * e.ts_s / wall_s if wall_s > 0 else 0.0
-        if isinstance(self.clock, VehicleClock):
-            loop["telemetry_timeouts"] = self.clock.timeouts
-        loop["flown_s"] = len(cmds) * e.ts_s  # with a descent flown after the mission
-        return FlightResult(self.controller_name, self.config.source, reason,
-                            min(len(cmds), mission_steps) * e.ts_s, metrics,
-                            loop, self.events, self._link_summary(), record,
-                            None if rec.path is None else str(rec.path))
+        loop["realtime_ratio"] = n_flown * e.ts_s / wall_s if wall_s > 0 else 0.0
+        loop.update(session.loop_summary())
+        loop["flown_s"] = n_flown * e.ts_s  # with a descent flown after the mission
+        rec = ctx.recorder
+        return FlightResult(self.controller_name, self.config.source, reason, min(n_flown, self.mission_steps) * e.ts_s,
+                            metrics, loop, ctx.events, session.summary(), record,
+                            None if rec.path is None else str(rec.path), experiment=e.name)
+
+    def _metrics(self, tr: _Track, closing: State) -> tuple[FlightRecord | None, dict]:
+        if not tr.cmds:
+            return None, {}
+        e = self.config.experiment
+        n = min(len(tr.cmds), self.mission_steps)  # a descent flown after the mission is logged, not measured
+        states = tr.truths if tr.truths else tr.states
+        states.append(closing)
+        tr.refs.append(self._closing_reference(tr, n))
+        record = FlightRecord(e.ts_s, np.array(states[:n + 1], float), np.array(tr.refs[:n + 1], float),
+                              np.array(tr.cmds[:n], float), np.array(tr.js[:n], dtype=np.int64))
+        try:
+            metrics = flight_metrics(record, self.config, self.mission, self.cost)
+        except (ValueError, FloatingPointError) as exc:
+            self.ctx.event("warning", f"metrics not computed: {exc}")
+            metrics = {}
+        self.ctx.recorder.flight_metrics(self.ctx.now_ns(), metrics)
+        if self._tap is not None:
+            self._tap.finish(metrics)
+        return record, metrics
+
+    def _closing_reference(self, tr: _Track, n: int) -> State:
+        """The reference after the last one flown (it closes the record when the flight ended with the
+        mission; see ``close_at_end_time``)."""
+        if not self.close_at_end_time or tr.override is not None:
+            return tr.refs[-1]
+        r = self.mission.reference(n * self.ts)
+        ox, oy, oz = tr.origin
+        return r if ox == oy == oz == 0.0 else r._replace(x=r.x + ox, y=r.y + oy, z=r.z + oz)

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 from quadrotor.state import Command, State
 
-__all__ = ["EnvelopeLimits", "SafetyEnvelope", "LIMIT_FLAGS"]
+__all__ = ["EnvelopeLimits", "SafetyEnvelope", "LIMIT_FLAGS", "envelope_for"]
 
 LIMIT_FLAGS = ("thrust", "torque", "tilt", "geofence", "ceiling", "non-finite")
 
@@ -102,3 +102,12 @@ class SafetyEnvelope:
                        clip(-lim.level_kp * state.roll - lim.level_kd * state.roll_rate),
                        clip(-lim.level_kp * state.pitch - lim.level_kd * state.pitch_rate),
                        clip(-lim.level_kd * state.yaw_rate))
+
+
+def envelope_for(config) -> SafetyEnvelope:
+    """The envelope of a config: the vehicle's limits, ``[flight]``'s tilt, fence and ceiling, PD levelling gains."""
+    fc = config.flight
+    return SafetyEnvelope(EnvelopeLimits(
+        max_thrust_n=config.vehicle.max_thrust_n, max_angular_accel_rad_s2=config.vehicle.max_angular_accel_rad_s2,
+        max_tilt_rad=math.radians(fc.max_tilt_deg), fence_half_width_m=fc.fence_half_width_m,
+        ceiling_m=fc.ceiling_m, level_kp=config.pd.kp_phi, level_kd=config.pd.kd_phi))

@@ -21,7 +21,7 @@ Topics (paper frame: x north, y east, z **up**; SI units; field names in the sch
     Reference, same fields.  In simulation it has one more message than the commands: the
     reference at the end of the flight.
 ``/control/error``
-    reference − estimate, same fields (yaw wrapped to [−π, π)); the sign of ``J_e``.
+    reference - estimate, same fields (yaw wrapped to [-pi, pi)); the sign of ``J_e``.
 ``/control/command``
     Controller output before the safety envelope: thrust_n [N], roll_accel_rad_s2,
     pitch_accel_rad_s2, yaw_accel_rad_s2 [rad/s²].
@@ -72,9 +72,20 @@ the other on the file's time line (1 s apart), each announced on ``/flight``; ``
 recomputes every flight's metrics from ``/sim/truth``, ``/control/reference``,
 ``/control/command`` and the attached config, equal to the figures ``gcs sim`` printed.
 
-``gcs fly`` does not write from its control loop: :mod:`gcs.log.flightlog` hands compact
-records to a writer process (see there); times are the loop's clock — the vehicle's time since
-boot in lockstep, UTC (the monotonic clock plus a fixed offset) in real time.
+The pipeline (one for ``gcs fly`` and ``gcs sim``): a producer —
+:class:`~gcs.log.recorder.FlightRecorder` in the flight loop,
+:class:`~gcs.log.simrecorder.SimRecorder` in the simulation — builds typed records
+(:mod:`~gcs.log.records`: numbers and bytes, nothing formatted) and hands lists of them to a
+sink (:mod:`~gcs.log.sink`): :class:`~gcs.log.sink.BackgroundSink` frames them
+(:mod:`~gcs.log.framing`) to the writer process ``python -m gcs.log.worker``
+(:mod:`~gcs.log.worker`), :class:`~gcs.log.sink.InlineSink` writes them in this process.
+Either way :class:`~gcs.log.encoder.RecordEncoder` turns each record into its messages
+(:mod:`~gcs.log.jsonfmt`, :mod:`~gcs.log.linkframes`, stage costs by :mod:`gcs.control.cost`) on a
+:class:`~gcs.log.writer.FlightLog`, an MCAP file of :mod:`gcs.log.mcap` (the format layer:
+writer and robust reader, knowing nothing of flights).  The review tools (:mod:`gcs.log.review`)
+read the files back with :mod:`gcs.log.mcap.reader` and :mod:`~gcs.log.topics` only.  Times are
+the loop's clock in flight — the vehicle's time since boot in lockstep, UTC (the monotonic clock
+plus a fixed offset) in real time — and the simulated time line in simulation.
 
 Writing a log directly (one :class:`FlightLog` per flight, times from the loop's clock)::
 
@@ -93,14 +104,13 @@ Writing a log directly (one :class:`FlightLog` per flight, times from the loop's
         on a mode change, arming, failsafe, warning:
             log.event(t_ns, "failsafe", "link lost: landing", stale_s=0.4)
 
-Modules: :mod:`~gcs.log.writer` (:class:`FlightLog`, :func:`check_writable`),
-:mod:`~gcs.log.reader` (:func:`read_log`), :mod:`~gcs.log.topics` (names, fields, schemas),
-:mod:`~gcs.log.meta` (metadata, config and gains attachments), :mod:`~gcs.log.flightlog`
-(logging ``gcs fly`` flights through a writer process), :mod:`~gcs.log.simlog`
-(logging simulated flights, in this process or in the :mod:`~gcs.log.worker` process),
-:mod:`~gcs.log.flights` (flights and metrics from a log), :mod:`~gcs.log.review` (info,
-metrics, compare, export), :mod:`~gcs.log.plot` (figures), :mod:`~gcs.log.cli` (the ``gcs log``
-subcommands and ``gcs sim --log``).
+Modules: :mod:`~gcs.log.topics` (names, fields, schemas), :mod:`~gcs.log.records`,
+:mod:`~gcs.log.recorder`, :mod:`~gcs.log.simrecorder`, :mod:`~gcs.log.sink`,
+:mod:`~gcs.log.framing`, :mod:`~gcs.log.worker`, :mod:`~gcs.log.encoder`,
+:mod:`~gcs.log.jsonfmt`, :mod:`~gcs.log.linkframes`,
+:mod:`~gcs.log.writer` (:class:`FlightLog`), :mod:`~gcs.log.meta` (metadata, config and gains
+attachments, log file names), :mod:`gcs.log.mcap` (the format layer), :mod:`gcs.log.review` (the
+``gcs log`` tools).
 """
 
 from gcs.log.writer import FlightLog, check_writable

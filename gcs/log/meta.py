@@ -10,23 +10,28 @@ Attachments written by :func:`write_run_header`:
 
 from __future__ import annotations
 
+import os
+
+from pathlib import Path
+
 import dataclasses
 import datetime as _dt
 import json
 import sys
-from typing import Any, Iterable, Mapping
+from collections.abc import Iterable, Mapping
+from typing import Any
 
 import numpy as np
 
 from gcs import __version__
 
-__all__ = ["designed_gains", "run_metadata", "run_attachments", "write_run_header", "utc_stamp"]
+__all__ = ["default_log_path", "LOG_DIR", "designed_gains", "run_attachments", "run_metadata", "utc_stamp", "write_run_header"]
 
 
 def utc_stamp(now: _dt.datetime | None = None) -> str:
     """``YYYYmmddTHHMMSSZ`` of now (or ``now``) in UTC, for file names."""
-    now = now or _dt.datetime.now(_dt.timezone.utc)
-    return now.astimezone(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    now = now or _dt.datetime.now(_dt.UTC)
+    return now.astimezone(_dt.UTC).strftime("%Y%m%dT%H%M%SZ")
 
 
 def _settled_rows(table: np.ndarray) -> int:
@@ -85,7 +90,7 @@ def run_metadata(config: Any, controllers: Iterable[str], **extra: Any) -> dict[
         "experiment": config.experiment.name,
         "config": str(config.source),
         "software_version": __version__,
-        "start_time_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "start_time_utc": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         "command_line": " ".join(sys.argv),
         "ts_s": repr(config.experiment.ts_s),
         "matrices": config.experiment.matrices,
@@ -116,3 +121,19 @@ def write_run_header(log: Any, config: Any, controllers: Iterable[str], designed
     log.metadata("flight", run_metadata(config, controllers, **extra))
     for name, media, data in run_attachments(config, designed):
         log.attachment(name, media, data)
+
+
+#: Where flight and simulation logs go by default.
+LOG_DIR = "logs"
+
+
+def default_log_path(controller: str, experiment: str, directory: str | os.PathLike = LOG_DIR) -> Path:
+    """``logs/<UTC time>_<controller>_<experiment>.mcap`` (``_2``, ``_3`` ... when taken)."""
+    def safe(s: str) -> str:
+        return "".join(c if c.isalnum() or c in "-_." else "-" for c in s)
+
+    base = Path(directory) / f"{utc_stamp()}_{safe(controller)}_{safe(experiment)}"
+    p, i = base.with_suffix(".mcap"), 2
+    while p.exists():
+        p, i = Path(f"{base}_{i}.mcap"), i + 1
+    return p

@@ -8,13 +8,39 @@ fields, their types and units (Foxglove Studio shows the descriptions).  See
 from __future__ import annotations
 
 import json
-from typing import Mapping
+from collections.abc import Mapping
 
 __all__ = [
-    "STATE_FIELDS", "COMMAND_FIELDS", "HORIZON_FIELDS", "COST_FIELDS", "FIXED_FIELDS",
-    "STATE", "REFERENCE", "ERROR", "COMMAND", "COMMAND_LIMITED", "HORIZON", "COST", "TRUTH",
-    "TIMING", "EVENTS", "FLIGHT", "SIM_METRICS", "FLIGHT_METRICS", "MAVLINK_RAW", "MAVLINK_IN", "MAVLINK_OUT",
-    "RIG_RAW", "RIG_IN", "RIG_OUT", "RUN_METRICS", "schema_for", "schema_json", "mavlink_topic", "rig_topic",
+    "COMMAND",
+    "COMMAND_FIELDS",
+    "COMMAND_LIMITED",
+    "COST",
+    "COST_FIELDS",
+    "ERROR",
+    "EVENTS",
+    "FIXED_FIELDS",
+    "FLIGHT",
+    "FLIGHT_METRICS",
+    "HORIZON",
+    "HORIZON_FIELDS",
+    "MAVLINK_IN",
+    "MAVLINK_OUT",
+    "MAVLINK_RAW",
+    "REFERENCE",
+    "RIG_IN",
+    "RIG_OUT",
+    "RIG_RAW",
+    "RUN_METRICS",
+    "SIM_METRICS",
+    "STATE",
+    "STATE_FIELDS",
+    "TIMING",
+    "TIMING_FIELDS",
+    "TRUTH",
+    "mavlink_topic",
+    "rig_topic",
+    "schema_for",
+    "schema_json",
 ]
 
 STATE = "/control/state"
@@ -48,10 +74,13 @@ COMMAND_FIELDS = ("thrust_n", "roll_accel_rad_s2", "pitch_accel_rad_s2", "yaw_ac
 _COMMAND_UNITS = ("collective thrust [N]", "roll angular acceleration [rad/s^2]",
                   "pitch angular acceleration [rad/s^2]", "yaw angular acceleration [rad/s^2]")
 HORIZON_FIELDS = ("k", "steps_to_go", "mode")
+#: ``/loop/timing`` fields after ``k``, in the order of :class:`gcs.log.records.LoopTiming`.
+TIMING_FIELDS = ("jitter_s", "tick_s", "deadline_missed", "decode_s", "estimate_s", "control_s", "send_s",
+                 "log_prev_s")
 COST_FIELDS = ("state_cost", "input_cost", "stage_cost")
 
 #: Topics whose messages always carry exactly these numeric fields, in this order
-#: (the writer's fast path :meth:`gcs.log.FlightLog.write_values`).
+#: (formatted through the templates of :mod:`gcs.log.jsonfmt`).
 FIXED_FIELDS: dict[str, tuple[str, ...]] = {
     STATE: STATE_FIELDS, REFERENCE: STATE_FIELDS, ERROR: STATE_FIELDS, TRUTH: STATE_FIELDS,
     COMMAND: COMMAND_FIELDS, COMMAND_LIMITED: COMMAND_FIELDS, COST: COST_FIELDS,
@@ -59,7 +88,7 @@ FIXED_FIELDS: dict[str, tuple[str, ...]] = {
 
 
 def _numbers(fields, descriptions) -> dict:
-    return {f: {"type": "number", "description": d} for f, d in zip(fields, descriptions)}
+    return {f: {"type": "number", "description": d} for f, d in zip(fields, descriptions, strict=True)}
 
 
 def _obj(title: str, description: str, properties: Mapping[str, dict], required=(), extra: bool = False) -> dict:
@@ -72,17 +101,21 @@ _STATE_PROPS = _numbers(STATE_FIELDS, [f"[{u}]" for u in _STATE_UNITS])
 _CMD_PROPS = _numbers(COMMAND_FIELDS, _COMMAND_UNITS)
 
 _SCHEMAS: dict[str, tuple[str, dict]] = {
-    STATE: ("gcs.State", _obj("State estimate", "Paper frame (x north, y east, z up), SI units", _STATE_PROPS, STATE_FIELDS)),
-    REFERENCE: ("gcs.State", _obj("State", "Paper frame (x north, y east, z up), SI units", _STATE_PROPS, STATE_FIELDS)),
+    STATE: ("gcs.State", _obj("State estimate", "Paper frame (x north, y east, z up), SI units", _STATE_PROPS,
+                              STATE_FIELDS)),
+    REFERENCE: ("gcs.State", _obj("State", "Paper frame (x north, y east, z up), SI units", _STATE_PROPS,
+                                  STATE_FIELDS)),
     TRUTH: ("gcs.State", _obj("State", "Paper frame (x north, y east, z up), SI units", _STATE_PROPS, STATE_FIELDS)),
     ERROR: ("gcs.StateError", _obj("Tracking error", "reference - estimate (yaw wrapped to [-pi, pi))",
                                    _STATE_PROPS, STATE_FIELDS)),
-    COMMAND: ("gcs.Command", _obj("Command", "Controller output (before the safety envelope)", _CMD_PROPS, COMMAND_FIELDS)),
+    COMMAND: ("gcs.Command", _obj("Command", "Controller output (before the safety envelope)", _CMD_PROPS,
+                                  COMMAND_FIELDS)),
     COMMAND_LIMITED: ("gcs.Command", _obj("Command", "Command after the safety envelope (what was sent)",
                                           _CMD_PROPS, COMMAND_FIELDS)),
     HORIZON: ("gcs.Horizon", _obj("Horizon", "Finite-horizon schedule of this tick", {
         "k": {"type": "integer", "description": "control step index since the start of the flight"},
-        "steps_to_go": {"type": "integer", "description": "j >= 1 used by the finite-horizon law; 0 when another law flew"},
+        "steps_to_go": {"type": "integer",
+                        "description": "j >= 1 used by the finite-horizon law; 0 when another law flew"},
         "mode": {"type": "string", "description": "horizon | terminal | restart | fallback_pd | pd"},
     }, HORIZON_FIELDS)),
     COST: ("gcs.StageCost", _obj("Stage cost", "Terms of the controller's own cost J at this tick "
@@ -146,10 +179,10 @@ def schema_for(topic: str) -> tuple[str, dict]:
     known = _SCHEMAS.get(topic)
     if known is not None:
         return known
-    if topic.startswith(MAVLINK_IN) or topic.startswith(MAVLINK_OUT):
+    if topic.startswith((MAVLINK_IN, MAVLINK_OUT)):
         msg_type = topic.rsplit("/", 1)[-1]
         return (f"mavlink.{msg_type}", _obj(msg_type, "MAVLink message fields as decoded by pymavlink", {}, extra=True))
-    if topic.startswith(RIG_IN) or topic.startswith(RIG_OUT):
+    if topic.startswith((RIG_IN, RIG_OUT)):
         msg_type = topic.rsplit("/", 1)[-1]
         return (f"rig.{msg_type}", _obj(msg_type, "4-DOF rig message fields (docs/rig-protocol.md; SI units as "
                                         "named)", {}, extra=True))

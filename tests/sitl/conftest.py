@@ -7,8 +7,8 @@ import threading
 import pytest
 from sitl_testkit import Gcs
 
-from sitl.server import SitlServer
-from sitl.transport import UdpTransport
+from sitl.copter.server import SitlServer
+from sitl.net.udp import UdpTransport
 
 
 @pytest.fixture

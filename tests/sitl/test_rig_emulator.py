@@ -8,11 +8,11 @@ import random
 import pytest
 
 from quadrotor import rig_protocol as rp
-from quadrotor.state import State
-from sitl.rig_dynamics import RigParams, mix, step, unmix
-from sitl.rig_firmware import RigFirmware, RigSafetyParams
 from quadrotor.rig_protocol import AckResult, RigFlags, RigState
-from sitl.rig_sensors import RigSensorParams, RigSensors
+from quadrotor.state import State
+from sitl.rig.dynamics import RigParams, mix, step, unmix
+from sitl.rig.firmware import RigFirmware, RigSafetyParams
+from sitl.rig.sensors import RigSensorParams, RigSensors
 
 P = RigParams()
 HOVER = P.hover_thrust_n

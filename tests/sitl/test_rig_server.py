@@ -13,13 +13,13 @@ import pytest
 import serial
 
 from quadrotor import rig_protocol as rp
-from sitl.cli import main
 from quadrotor.clock import MonotonicClock
-from sitl.errors import UsageError
-from sitl.radio import RadioParams
-from sitl.rig import RigServer
 from quadrotor.rig_protocol import AckResult, RigFlags, RigState
-from sitl.transport import PtyTransport
+from sitl.cli import main
+from sitl.errors import UsageError
+from sitl.net.pty import PtyTransport
+from sitl.net.radio import RadioParams
+from sitl.rig.server import RigServer
 
 HOVER = 9.81
 

@@ -6,11 +6,11 @@ import math
 
 import pytest
 
-from sitl.autopilot import Mode
 from quadrotor.frames import euler_to_quaternion
-from sitl.simulation import InitialConditions, Simulation
-from sitl.vehicle_params import load_vehicle
 from quadrotor.wind import WindParams
+from sitl.copter.modes import Mode
+from sitl.copter.simulation import InitialConditions, Simulation
+from sitl.copter.vehicle_file import load_vehicle
 
 V = load_vehicle()
 LEVEL = (1.0, 0.0, 0.0, 0.0)

@@ -11,8 +11,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from sitl.server import SitlServer
-from sitl.transport import TcpTransport, UdpTransport
+from sitl.copter.server import SitlServer
+from sitl.net.tcp import TcpTransport
+from sitl.net.udp import UdpTransport
 
 M = mavlink
 ENC = mavlink.MAVLink(None, srcSystem=255, srcComponent=0)
@@ -92,12 +93,12 @@ def harness():
 def alive(srv: SitlServer) -> None:
     """The vehicle still simulates and still answers."""
     t = srv.sim.time_ns
-    srv._tick()
+    srv.tick()
     assert srv.sim.time_ns > t
     k = srv.sim.world.kinematics
     assert all(math.isfinite(v) for v in k)
     before = srv.counters.frames_in
-    srv._process([((0, "probe"), pack(M.MAVLink_param_request_read_message(0, 0, b"GUID_TIMEOUT", -1)), True)])
+    srv.handle_input([((0, "probe"), pack(M.MAVLink_param_request_read_message(0, 0, b"GUID_TIMEOUT", -1)), True)])
     assert srv.counters.frames_in == before + 1
     srv.links.discard()
 
@@ -105,7 +106,7 @@ def alive(srv: SitlServer) -> None:
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.binary(max_size=600), st.booleans())
 def test_random_bytes_never_crash(harness, data, datagram):
-    harness._process([((0, "fuzz"), data, datagram)])
+    harness.handle_input([((0, "fuzz"), data, datagram)])
     alive(harness)
 
 
@@ -114,7 +115,7 @@ def test_random_bytes_never_crash(harness, data, datagram):
 def test_mutated_frames_never_crash(harness, msgs, data, datagram):
     frames = [pack(m) for m in msgs]
     blob = b"".join(mutate(f, data) if data.draw(st.booleans()) else f for f in frames)
-    harness._process([((0, "mutant"), blob, datagram)])
+    harness.handle_input([((0, "mutant"), blob, datagram)])
     alive(harness)
 
 
@@ -122,7 +123,7 @@ def test_mutated_frames_never_crash(harness, msgs, data, datagram):
 @given(messages)
 def test_hostile_field_values_never_crash(harness, msg):
     errors = harness.counters.handler_errors
-    harness._process([((0, "hostile"), pack(msg), True)])
+    harness.handle_input([((0, "hostile"), pack(msg), True)])
     assert harness.counters.handler_errors == errors       # handled, not merely survived
     harness.sim.params.set("SYSID_THISMAV", 1)              # keep the harness addressable
     alive(harness)
@@ -136,7 +137,7 @@ def test_bad_input_is_counted(harness):
     unknown = bytearray(pack(M.MAVLink_heartbeat_message(1, 2, 3, 4, 5, 3)))
     unknown[7] = 0xEE    # msgid low byte -> an id the dialect does not know (CRC cannot match either)
     peer = (0, "c")
-    harness._process([(peer, b"\x00\x01garbage", True), (peer, bytes(bad_crc), True), (peer, good[:-3], True),
+    harness.handle_input([(peer, b"\x00\x01garbage", True), (peer, bytes(bad_crc), True), (peer, good[:-3], True),
                       (peer, pack(M.MAVLink_command_long_message(9, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)), True)])
     c = harness.counters.as_dict()
     assert c["bad_prefix"] > c0["bad_prefix"] and c["garbage_bytes"] >= c0["garbage_bytes"] + 9

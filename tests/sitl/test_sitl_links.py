@@ -11,9 +11,10 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from sitl_testkit import Gcs
 
-from sitl.radio import RadioParams
-from sitl.server import SitlServer
-from sitl.transport import TcpTransport, UdpTransport
+from sitl.copter.server import SitlServer
+from sitl.net.radio import RadioParams
+from sitl.net.tcp import TcpTransport
+from sitl.net.udp import UdpTransport
 
 M = mavutil.mavlink
 STEPS = 400

@@ -7,11 +7,13 @@ import time
 
 import pytest
 from pymavlink import mavutil
-
 from sitl_testkit import Gcs
-from sitl.simulation import InitialConditions
-from sitl.transport import PtyTransport, TcpTransport, UdpTransport
+
 from quadrotor.wind import WindParams
+from sitl.copter.simulation import InitialConditions
+from sitl.net.pty import PtyTransport
+from sitl.net.tcp import TcpTransport
+from sitl.net.udp import UdpTransport
 
 M = mavutil.mavlink
 GUIDED_NOGPS, LAND = 20, 9
@@ -306,7 +308,7 @@ def test_tcp_endpoint(make_server, make_gcs):
 
 def test_serial_pty_endpoint_with_baud_limit(make_server, make_gcs):
     from quadrotor.clock import MonotonicClock
-    from sitl.radio import RadioParams
+    from sitl.net.radio import RadioParams
     clock = MonotonicClock()
     srv = make_server(transport=PtyTransport(clock.now_ns), radio=RadioParams(baud=57600), clock=clock)
     assert srv.connection_string.startswith("/dev/")

@@ -9,8 +9,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from sitl.server import SitlServer
-from sitl.transport import UdpTransport
+from sitl.copter.server import SitlServer
+from sitl.net.udp import UdpTransport
 
 M = mavlink
 ENC = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
@@ -72,7 +72,7 @@ def flying():
 
 
 def send(srv: SitlServer, msg) -> None:
-    srv._process([(PEER, wire(msg)[0], True)])
+    srv.handle_input([(PEER, wire(msg)[0], True)])
 
 
 def fly(srv: SitlServer, steps: int, thrust: float = 0.45) -> None:
@@ -105,7 +105,7 @@ def test_non_finite_inputs_are_refused_counted_and_never_reach_the_physics(flyin
     target_before = ap.target
     params_before = {n: srv.sim.params[n] for n in srv.sim.params}
     c0 = dict(srv.counters.as_dict())
-    srv._process([(PEER, frame, True)])
+    srv.handle_input([(PEER, frame, True)])
     c = srv.counters.as_dict()
     assert c["handler_errors"] == c0["handler_errors"]
     refused = uses_non_finite(received)
@@ -116,7 +116,7 @@ def test_non_finite_inputs_are_refused_counted_and_never_reach_the_physics(flyin
         if received.get_type() == "PARAM_SET":
             assert {n: srv.sim.params[n] for n in srv.sim.params} == params_before
     for _ in range(5):                                           # let what was accepted act for 50 ms
-        srv._step()
+        srv.step()
     assert_finite(srv)
     fly(srv, 3)
     assert_finite(srv)

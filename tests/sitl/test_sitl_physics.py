@@ -10,11 +10,11 @@ from hypothesis import strategies as st
 
 from quadrotor import frames
 from quadrotor import plant as reduced
-from sitl import rigid_body
-from sitl.mixer import Mixer
-from sitl.rigid_body import RigidBodyModel, RigidBodyState, initial_state, rotor_wrench
-from sitl.vehicle_params import load_vehicle
-from sitl.world import ReducedPlant, RigidBodyPlant
+from sitl.copter import rigid_body
+from sitl.copter.mixer import Mixer
+from sitl.copter.rigid_body import RigidBodyModel, RigidBodyState, initial_state, rotor_wrench
+from sitl.copter.vehicle_file import load_vehicle
+from sitl.copter.world import ReducedPlant, RigidBodyPlant
 
 V = load_vehicle("quad-1kg")
 MODEL = RigidBodyModel(V)

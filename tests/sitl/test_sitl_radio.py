@@ -7,12 +7,11 @@ import random
 
 import pytest
 from pymavlink import mavutil
-
 from sitl_testkit import Gcs
 
 from quadrotor.clock import ManualClock, MonotonicClock
-from sitl.radio import RadioLink, RadioParams, RadioPipe
-from sitl.streams import StreamScheduler
+from sitl.copter.streams import StreamScheduler
+from sitl.net.radio import RadioLink, RadioParams, RadioPipe
 
 M = mavutil.mavlink
 MS = 1_000_000

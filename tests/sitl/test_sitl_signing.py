@@ -9,10 +9,11 @@ import time
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from sitl.endpoint import MavlinkEndpoint
-from sitl.server import SitlServer
-from quadrotor.mavlink.signing import NEW_STREAM_WINDOW, SignatureCheck, SigningStateFile, default_state_path, setup_signing, wall_clock_timestamp
-from sitl.transport import UdpTransport
+from quadrotor.mavlink.signing import (NEW_STREAM_WINDOW, SignatureCheck, SigningStateFile, default_state_path,
+                                       setup_signing, wall_clock_timestamp)
+from sitl.copter.server import SitlServer
+from sitl.net.endpoint import MavlinkEndpoint
+from sitl.net.udp import UdpTransport
 
 M = mavlink
 KEY = bytes(range(32))
@@ -113,6 +114,23 @@ def test_timestamp_rules_after_the_signature():
     assert rx.parse_buffer(frame)[0].get_type() == "BAD_DATA"          # the same frame again
     assert check.replayed == 1 and check.last_rejection == "replayed"
     assert rx.parse_buffer(arm_frame(enc))[0].get_type() == "COMMAND_LONG"  # the next one: fine
+
+
+def test_each_refused_frame_of_one_datagram_is_counted_for_its_own_reason():
+    """A datagram is parsed whole before its frames are classified: every refusal keeps its reason."""
+    ep = MavlinkEndpoint(1, 1, KEY)
+    now = wall_clock_timestamp()
+    enc = signer(timestamp=now)
+    frame = arm_frame(enc)
+    stale = arm_frame(signer(timestamp=now - NEW_STREAM_WINDOW - 100, link_id=2))
+    radio_status = bytearray(pack(signer(bytes(32), now, link_id=3), M.MAVLink_radio_status_message(0, 0, 0, 0, 0,
+                                                                                                     0, 0)))
+    assert [m.get_type() for m in ep.decode("gcs", frame, datagram=True)] == ["COMMAND_LONG"]
+    got = ep.decode("gcs", frame + stale + forged(now + 10**9) + bytes(radio_status) + frame, datagram=True)
+    assert [m.get_type() for m in got] == ["RADIO_STATUS"]   # a SiK radio's frame passes unsigned (as ArduPilot)
+    c = ep.counters
+    assert (c.replayed, c.stale_timestamp, c.bad_signature, c.unsigned) == (2, 1, 1, 0)
+    assert c.frames_in == 2 and c.malformed == 0
 
 
 def test_forged_frame_then_valid_arm_over_udp(make_server):

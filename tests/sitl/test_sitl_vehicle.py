@@ -9,12 +9,13 @@ import textwrap
 import numpy as np
 import pytest
 
-from sitl import battery as batt
 from quadrotor.errors import ConfigError
 from quadrotor.frames import Kinematics
-from sitl.ned_sensors import NedSensors
-from sitl.params import ParamStore, ardupilot_params
-from sitl.vehicle_params import BatteryParams, bundled_vehicles, load_vehicle, parse_vehicle
+from sitl.copter import battery as batt
+from sitl.copter.params import ParamStore, ardupilot_params
+from sitl.copter.sensors import NedSensors
+from sitl.copter.vehicle import BatteryParams
+from sitl.copter.vehicle_file import bundled_vehicles, load_vehicle, parse_vehicle
 
 MINIMAL = {"vehicle": {"mass_kg": 1.0, "inertia_kg_m2": [0.01, 0.01, 0.02]},
            "rotors": {"arm_length_m": 0.2, "max_thrust_n": 6.0}}

@@ -1,0 +1,7 @@
+"""``python -m gcs.cli``."""
+
+import sys
+
+from gcs.cli import main
+
+sys.exit(main())

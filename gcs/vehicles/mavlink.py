@@ -1,0 +1,371 @@
+"""A MAVLink autopilot as a vehicle session: the generic off-board flight, the firmware's ways in a profile.
+
+Sequence::
+
+    heartbeat -> TIMESYNC -> streams requested -> the profile's parameters -> telemetry fresh,
+    battery -> the profile's flight mode, confirmed by HEARTBEAT -> setpoints streamed -> arm
+    -> mission (the loop) -> the profile's landing -> disarmed -> parameters restored
+
+Every frame both ways goes to the flight log.  Telemetry is validated before it reaches the
+estimator (:mod:`gcs.flight.validate`), every outgoing message passes the output guard
+(:mod:`gcs.link.guard`), the streams the controller flies on are watched
+(:mod:`gcs.vehicles.streams`).  All waiting is on the flight's clock (:func:`gcs.flight.clock.wait_until`).
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from gcs.config import Config
+from gcs.control import model_params
+from gcs.errors import PreflightRefused
+from gcs.estimate import StateEstimator
+from gcs.flight.clock import VehicleClock, wait_until
+from gcs.flight.context import FlightContext
+from gcs.link.guard import GuardLimits, OutputGuard, UnsafeCommand
+from gcs.link.mavlink import LinkError, MavlinkLink
+from gcs.vehicles.ardupilot import ArduPilotProfile
+from gcs.vehicles.output import OutputAdapter, OutputModel
+from gcs.vehicles.mavlink_preflight import MavlinkPreflight
+from gcs.vehicles.params import VehicleParams
+from gcs.vehicles.streams import StreamMonitor
+from gcs.vehicles.telemetry import Telemetry
+from quadrotor.state import Command, State
+
+__all__ = ["MavlinkSession", "MAX_BODY_RATE_RAD_S", "MIN_RATE_FRACTION"]
+
+#: Largest body rate a setpoint may carry [rad/s] (the output guard's limit).
+MAX_BODY_RATE_RAD_S = 35.0
+#: The loop fails safe when a stream the controller flies on stays below this share of its requested rate.
+MIN_RATE_FRACTION = 0.25
+STREAM_IDS = {"ATTITUDE": mavlink.MAVLINK_MSG_ID_ATTITUDE, "LOCAL_POSITION_NED": mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED}
+
+
+class MavlinkSession:
+    """One MAVLink vehicle flown off-board.
+
+    Parameters
+    ----------
+    config : Config
+    link : MavlinkLink
+    profile : ArduPilotProfile or None
+        The firmware family's conventions (default ArduPilot).
+    output : str or None
+        Setpoint message (default: the config's ``[flight] output``).
+    vehicle_alive : callable () -> str or None
+        Why the vehicle's process is gone (a child simulator that exited), or None.
+    """
+
+    lands_itself = True
+
+    def __init__(self, config: Config, link: MavlinkLink, *, profile: ArduPilotProfile | None = None,
+                 output: str | None = None, vehicle_alive: Callable[[], str | None] | None = None) -> None:
+        fc = config.flight
+        self.config = config
+        self.link = link
+        self.profile = profile or ArduPilotProfile()
+        self.control_name = self.profile.control_name
+        self.output_kind = output or fc.output
+        self.vehicle_alive = vehicle_alive
+        self.model = model_params(config)
+        self.period_s = config.experiment.ts_s
+        self.estimator = StateEstimator(config.experiment.ts_s, self.model, (fc.position_std_m,) * 3,
+                                        config.estimator.accel_noise_std_m_s2, ground_z_m=None)
+        self.telemetry = Telemetry(self.estimator, (fc.position_std_m ** 2,) * 3, (fc.velocity_std_m_s ** 2,) * 3,
+                                   on_event=self.event, target_component=link.target_component,
+                                   mode_name=self.profile.mode_name)
+        self.guard = OutputGuard(GuardLimits(max_body_rate_rad_s=MAX_BODY_RATE_RAD_S))
+        link.guard = self.guard
+        rate = fc.telemetry_rate_hz
+        self.streams = StreamMonitor({"ATTITUDE": rate, "LOCAL_POSITION_NED": rate}, min_rate_hz=MIN_RATE_FRACTION * rate)
+        self.adapter: OutputAdapter | None = None
+        self.params: VehicleParams | None = None
+        self.ctx: FlightContext | None = None
+        self._fault: tuple[str, str] | None = None
+        self._link_down = False
+        self.armed_sent = False
+        self._gone_checked = 0
+
+    # ------------------------------------------------------------------ wiring and I/O
+    def attach(self, ctx: FlightContext) -> None:
+        self.ctx = ctx
+        if ctx.clock is None:
+            ctx.clock = VehicleClock(lambda: self.telemetry.status.time_boot_ms * 1_000_000, self._pump_wait)
+        if ctx.recorder.enabled:
+            rec = ctx.recorder
+            self.link.on_frame = lambda direction, msg, accepted=True: rec.mavlink(ctx.now_ns(), direction, msg,
+                                                                                   accepted)
+        self.params = VehicleParams(self.link, self.handle, self.event, self.check_interrupt)
+
+    def event(self, kind: str, text: str) -> None:
+        self.ctx.event(kind, text)  # type: ignore[union-attr]
+
+    def handle(self, msg) -> None:
+        self.telemetry.handle(msg, self.ctx.now_ns())  # type: ignore[union-attr]
+
+    def pump(self) -> int:
+        """Drain the link into the telemetry (never blocks); the number of messages."""
+        try:
+            msgs = self.link.drain()
+        except LinkError as exc:
+            self._link_failed(exc)
+            return 0
+        for m in msgs:
+            self.handle(m)
+        return len(msgs)
+
+    def _pump_wait(self, wait_s: float) -> None:
+        if self.pump() == 0:
+            self.link.wait_readable(wait_s)
+
+    def _link_failed(self, exc: Exception) -> None:
+        """A dead link shows as stale telemetry (the failsafe acts); said once."""
+        if not self._link_down:
+            self._link_down = True
+            self.event("warning", f"link failure: {exc}")
+
+    def send_message(self, msg) -> None:
+        try:
+            self.link.send(msg)
+        except UnsafeCommand as exc:
+            self._unsafe(str(exc))
+        except LinkError as exc:
+            self._link_failed(exc)
+
+    def _unsafe(self, why: str) -> None:
+        """A command was blocked before the wire: send the safe one instead, and fail safe (once)."""
+        first = self._fault is None
+        if first:
+            self._fault = ("unsafe_command", "")
+            self.event("failsafe", f"output guard blocked a command ({why}): safe level command, landing")
+        try:
+            self.link.send(self._safe_command())
+        except (UnsafeCommand, LinkError) as exc:
+            if first:
+                self.event("warning", f"the safe command could not be sent either: {exc}")
+
+    def _safe_command(self):
+        """Level, yaw held, 90 % of hover thrust (zero thrust before the adapter exists: on the ground)."""
+        if self.adapter is None:
+            return self._target(7, (1.0, 0.0, 0.0, 0.0), 0.0)
+        return self.adapter.level(self.estimator.state(), 0.9 * self.model.hover_thrust_n,
+                                  self.telemetry.status.time_boot_ms)
+
+    def _target(self, type_mask: int, q, thrust: float):
+        link = self.link
+        return link.mav.set_attitude_target_encode(self.telemetry.status.time_boot_ms & 0xFFFFFFFF, link.target_system,
+                                                   link.target_component, type_mask, q, 0.0, 0.0, 0.0, thrust)
+
+    def check_interrupt(self) -> None:
+        if self.ctx.interrupts.count:  # type: ignore[union-attr]
+            raise PreflightRefused("interrupted before arming")
+
+    # ------------------------------------------------------------------ waiting on the flight's clock
+    def wait(self, predicate: Callable[[], bool], timeout_s: float, *, thrust_n: float | None = 0.0,
+              until_interrupt: bool = True) -> bool:
+        """Until ``predicate`` or ``timeout_s`` of the flight's clock: level setpoints at ``thrust_n`` every
+        period (None: only listen — heartbeats once a second, and in lockstep a THROTTLE_IGNORE target that
+        the autopilot refuses but that moves the simulator's time)."""
+        ctx = self.ctx
+        next_hb = [ctx.now_ns()]
+
+        def pump() -> None:
+            self.pump()
+            why = self._vehicle_gone(force=True)
+            if why is not None:
+                raise LinkError(why)
+            if self.adapter is not None:
+                self._watch_streams(ctx.now_ns())  # streams clobbered while landing are asked for again too
+
+        def step() -> bool:
+            if thrust_n is not None and self.adapter is not None:
+                self.send_message(self.adapter.level(self.estimator.state(), thrust_n, self.telemetry.status.time_boot_ms))
+                return True
+            if ctx.now_ns() >= next_hb[0]:
+                next_hb[0] += 1_000_000_000
+                self._send_quietly(self.link.send_heartbeat)
+            if ctx.lockstep and self.adapter is not None:
+                self.send_message(self._target(64 | 7, (1.0, 0.0, 0.0, 0.0), 0.0))
+                return True
+            return False
+
+        def stop() -> bool:
+            return until_interrupt and ctx.interrupts.count > 0 and not self.telemetry.status.armed
+
+        return wait_until(ctx.clock, predicate, timeout_s, period_s=self.period_s, pump=pump, step=step, stop=stop)
+
+    def _send_quietly(self, send: Callable[[], object]) -> None:
+        try:
+            send()
+        except LinkError as exc:
+            self._link_failed(exc)
+
+    def _vehicle_gone(self, force: bool = False) -> str | None:
+        if self.vehicle_alive is None:
+            return None
+        self._gone_checked += 1
+        if not force and self._gone_checked % 10:
+            return None  # a syscall: ten times a second is soon enough
+        return self.vehicle_alive()
+
+    def _watch_streams(self, now_ns: int) -> str | None:
+        """Ask again for a stream that fell; the failure text when it stays too slow."""
+        verdict = self.streams.update(now_ns, self.telemetry.counts)
+        for name in verdict.rerequest:
+            rate = self.streams.requested_hz[name]
+            got = self.streams.rates_hz.get(name, 0.0)
+            if self.streams.rerequests <= 3 or self.streams.rerequests % 20 == 0:
+                self.event("warning", f"{name} at {got:.1f} Hz instead of {rate:g} Hz (another ground station's "
+                                       f"stream request?): asking for {rate:g} Hz again")
+            self._send_quietly(lambda name=name, rate=rate: self.link.send_message_interval(STREAM_IDS[name], rate))
+        return verdict.failure
+
+    # ------------------------------------------------------------------ preflight
+    def preflight(self) -> None:
+        """Everything before arming, then arm; raises :class:`PreflightRefused` or :class:`LinkError`."""
+        MavlinkPreflight(self).run()
+
+    def configure_output(self, out) -> None:
+        """The output adapter, once the profile has read the hover throttle and the angle gains."""
+        fc, link = self.config.flight, self.link
+        self.adapter = OutputAdapter(OutputModel(
+            kind=self.output_kind, mass_kg=self.model.mass_kg, gravity_m_s2=self.model.gravity_m_s2,
+            hover_throttle=out.hover_throttle, inertia_kg_m2=fc.inertia_kg_m2, max_torque_nm=fc.max_torque_nm,
+            rate_gain_1_s=fc.rate_gain_1_s, angle_gain_1_s=out.angle_gain_1_s, ts_s=self.period_s),
+            link.mav, link.target_system, link.target_component)
+        self.event("output", f"{self.output_kind}: hover throttle {out.hover_throttle:.3f}, "
+                             f"angle gains {out.angle_gain_1_s}")
+
+    def disarm_on_ground(self) -> None:
+        """After a preflight refusal that came after the arm command: disarm (the vehicle is on the ground).
+
+        Sent whatever the vehicle last reported: a refusal may come exactly because its report of
+        the arming was lost (disarming a disarmed vehicle on the ground is harmless).
+        """
+        if not self.armed_sent:
+            return
+        self.pump()
+        try:
+            self.link.arm(False, on_message=self.handle)
+            self.wait(lambda: not self.telemetry.status.armed, 3.0, thrust_n=None, until_interrupt=False)
+        except LinkError as exc:
+            self.event("warning", f"disarm after the refusal not acknowledged: {exc}")
+        self.event("arming", "disarmed after the preflight refusal" if not self.telemetry.status.armed
+                    else "still armed after the preflight refusal: disarm it")
+
+    # ------------------------------------------------------------------ the loop's side
+    def estimate(self, dt_s: float, last_command: Command | None) -> State:
+        if dt_s > 0:
+            self.estimator.predict(dt_s, last_command)
+        return self.estimator.state()
+
+    def truth(self) -> State | None:
+        return None
+
+    def fresh(self, now_ns: int, stale_s: float) -> bool:
+        return self.telemetry.fresh(now_ns, stale_s)
+
+    def fault(self) -> tuple[str, str] | None:
+        gone = self._vehicle_gone()
+        if gone is not None:
+            return ("link_error", gone)
+        return self._fault
+
+    def health(self, now_ns: int) -> tuple[str, str] | None:
+        failure = self._watch_streams(now_ns)
+        return None if failure is None else ("telemetry_slow", failure)
+
+    def control_lost(self) -> str | None:
+        return self.profile.control_lost(self.telemetry.status)
+
+    def mission_origin(self, state: State) -> tuple[float, float, float]:
+        return (state.x, state.y, state.z)
+
+    def send(self, state: State, command: Command) -> None:
+        fields = self.adapter.fields(state, command)  # type: ignore[union-attr]
+        self.send_message(self.adapter.encode(fields, self.telemetry.status.time_boot_ms))  # type: ignore[union-attr]
+
+    def housekeeping(self) -> None:
+        self._send_quietly(self.link.send_heartbeat)
+        self._send_quietly(lambda: self.telemetry.timesync_sent.add(self.link.send_timesync()))
+
+    def landed(self) -> bool:
+        return not self.telemetry.status.armed
+
+    # ------------------------------------------------------------------ the end
+    def finish(self, reason: str) -> None:
+        gone = self._vehicle_gone(force=True)
+        if gone is not None:
+            self.event("warning", f"{gone}: nothing left to land")
+            return
+        if reason == "vehicle_took_over":
+            self.wait(lambda: not self.telemetry.status.armed, self.config.flight.land_timeout_s, thrust_n=None,
+                       until_interrupt=False)
+        else:
+            self._land(reason)
+
+    def _land(self, reason: str) -> None:
+        """The profile's LAND, level setpoints while waiting, until disarmed (or the timeout).
+
+        With the telemetry gone the acknowledgement cannot come back: LAND is sent once
+        without waiting long, and level setpoints keep the vehicle upright (they also keep
+        a lockstep simulator's time moving) while it lands on its own.  LAND is sent again
+        twice a second until the vehicle reports it: a lost frame must not leave it in the
+        flight mode.  Should LAND never be taken, 90 % of hover thrust, level, still brings
+        it down gently.
+        """
+        p, st, ctx = self.profile, self.telemetry.status, self.ctx
+        quick = reason == "telemetry_lost"
+        try:
+            res = p.request_mode(self.link, p.land_mode, on_message=self.handle, timeout_s=0.3 if quick else 3.0,
+                                 retries=0 if quick else 2)
+            if res != mavlink.MAV_RESULT_ACCEPTED:
+                self.event("warning", f"LAND refused (MAV_RESULT {res})")
+        except LinkError as exc:
+            self.event("warning", f"LAND not acknowledged: {exc}")
+        self.event("phase", "landing (LAND mode)")
+        next_land = [ctx.now_ns() + 500_000_000]
+
+        def done() -> bool:
+            if st.armed and st.custom_mode != p.land_mode and ctx.now_ns() >= next_land[0]:
+                next_land[0] = ctx.now_ns() + 500_000_000
+                self.send_message(p.set_mode_message(self.link, p.land_mode))
+            return not st.armed or ctx.interrupts.count >= 3
+
+        timeout = self.config.flight.land_timeout_s
+        landed = self.wait(done, timeout, thrust_n=0.9 * self.model.hover_thrust_n, until_interrupt=False)
+        if landed and not st.armed:
+            self.event("landed", "landed and disarmed")
+        else:
+            self.event("warning", f"not disarmed {timeout:g} s after LAND")
+
+    def abandon(self) -> None:
+        """LAND, sent a few times without waiting (the vehicle's guided timeout is the fallback)."""
+        for _ in range(3):
+            try:
+                self.link.send(self.profile.set_mode_message(self.link, self.profile.land_mode))
+            except (LinkError, UnsafeCommand):
+                return
+
+    def restore(self) -> None:
+        if self.params is not None:
+            self.params.restore(lambda: self.telemetry.status.armed)
+
+    def summary(self) -> dict:
+        c = self.link.counters
+        samples = self.telemetry.timesync_samples_ms
+        return {"received": c.received, "sent": c.sent, "bad_data": c.bad_data, "other_system": c.other_system,
+                "unsigned_rejected": c.unsigned_rejected, "bad_signature": c.bad_signature,
+                "other_address": c.other_address, "truncated": c.truncated, "malformed": c.malformed,
+                "blocked": c.blocked, "guard_blocked": dict(self.guard.blocked),
+                "telemetry_rejected": dict(self.telemetry.validator.rejected),
+                "stream_rates_hz": dict(self.streams.rates_hz), "stream_rerequests": self.streams.rerequests,
+                "timesync_rtt_ms": self.telemetry.timesync_rtt_ms,
+                "timesync_rtt_median_ms": float(np.median(samples)) if samples else None}
+
+    def loop_summary(self) -> dict:
+        clock = self.ctx.clock if self.ctx is not None else None
+        return {"telemetry_timeouts": clock.timeouts} if isinstance(clock, VehicleClock) else {}

@@ -1,0 +1,114 @@
+"""One simulated vehicle without any link: world, sensors and autopilot advanced tick by tick.
+
+A tick is one period of the autopilot's inner loop (400 Hz by default)::
+
+    rotor_cmd = autopilot.update(t, readings(t))   # targets received before t apply now
+    world.step(rotor_cmd, tick)                    # plant sub-steps of <= 1 ms, wind, battery
+    t += tick; readings(t) = sensors(world)        # what telemetry at t reports
+
+Randomness is seeded per stream: wind ``default_rng([seed, 1])``, sensor noise
+``default_rng([seed, 2])`` (the radios seed their own, :mod:`sitl.net.radio`), so the same
+seed and the same command sequence give the same trajectory.  Time is integer
+nanoseconds.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from quadrotor.wind import Wind, WindParams
+from sitl.copter.autopilot import Autopilot
+from sitl.copter.params import ParamStore, ardupilot_params
+from sitl.copter.rigid_body import RigidBodyState, initial_state
+from sitl.copter.sensors import NedSensors
+from sitl.copter.vehicle import VehicleParams
+from sitl.copter.world import World
+
+__all__ = ["Simulation", "InitialConditions"]
+
+
+@dataclass(frozen=True)
+class InitialConditions:
+    """Where and how the vehicle starts (at rest).
+
+    ``altitude_m`` above home (0 = on the ground); Euler angles in degrees (a
+    vehicle on the ground with a tilt rests on a slope).
+    """
+
+    altitude_m: float = 0.0
+    roll_deg: float = 0.0
+    pitch_deg: float = 0.0
+    yaw_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("altitude_m", "roll_deg", "pitch_deg", "yaw_deg"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"initial {name} must be finite, got {getattr(self, name)!r}")
+        if self.altitude_m < 0.0:
+            raise ValueError(f"initial altitude_m must be >= 0, got {self.altitude_m!r}")
+
+    def state(self) -> RigidBodyState:
+        """The rigid-body state."""
+        return initial_state(self.altitude_m, math.radians(self.roll_deg), math.radians(self.pitch_deg),
+                             math.radians(self.yaw_deg))
+
+
+class Simulation:
+    """World + sensors + autopilot of one vehicle.
+
+    Parameters
+    ----------
+    vehicle : VehicleParams
+    seed : int
+        Base seed of the random streams.
+    wind : WindParams or None
+        None = calm.
+    initial : InitialConditions or None
+    params : mapping, optional
+        ArduPilot parameter overrides (name -> value).
+    loop_rate_hz : int
+        Inner-loop (tick) rate; 1e9 / rate must be an integer number of ns.
+    max_substep_s : float
+        Largest physics step.
+    prearm_delay_s : float
+        Simulated time after boot before arming is allowed (0 = at once).
+    """
+
+    def __init__(self, vehicle: VehicleParams, *, seed: int = 0, wind: WindParams | None = None,
+                 initial: InitialConditions | None = None, params: Mapping[str, float] | None = None,
+                 loop_rate_hz: int = 400, max_substep_s: float = 0.001, prearm_delay_s: float = 0.0) -> None:
+        if loop_rate_hz <= 0 or 1_000_000_000 % loop_rate_hz:
+            raise ValueError(f"loop_rate_hz must divide 1e9 ns exactly, got {loop_rate_hz!r}")
+        self.vehicle = vehicle
+        self.seed = seed
+        self.tick_ns = 1_000_000_000 // loop_rate_hz
+        self.dt_s = self.tick_ns * 1e-9
+        self.params = ParamStore(ardupilot_params(vehicle), params)
+        wind_model = Wind(wind, np.random.default_rng([seed, 1])) if wind is not None else None
+        self.initial = initial or InitialConditions()
+        self.world = World(vehicle, wind_model, self.initial.state(), max_substep_s)
+        self.sensors = NedSensors(vehicle.sensors, np.random.default_rng([seed, 2]))
+        self.autopilot = Autopilot(vehicle, self.params, prearm_delay_s)
+        self.time_ns = 0
+        k = self.world.kinematics
+        self.imu = self.sensors.imu(k)
+        self.nav = self.sensors.nav(k)
+        self.autopilot.observe(self.imu, self.nav, self.world.battery)
+
+    @property
+    def time_s(self) -> float:
+        """Simulated time since boot [s]."""
+        return self.time_ns * 1e-9
+
+    def tick(self) -> None:
+        """Advance one inner-loop period."""
+        cmd = self.autopilot.update(self.time_ns, self.dt_s, self.imu, self.nav, self.world.battery)
+        self.world.step(cmd, self.dt_s)
+        self.time_ns += self.tick_ns
+        k = self.world.kinematics
+        self.imu = self.sensors.imu(k)
+        self.nav = self.sensors.nav(k)

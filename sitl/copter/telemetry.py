@@ -1,0 +1,211 @@
+"""Telemetry messages of the emulated autopilot, built from a :class:`~sitl.copter.simulation.Simulation`.
+
+What each message carries (all from the sensor readings, not the truth):
+
+* ATTITUDE / ATTITUDE_QUATERNION: IMU attitude and body rates (noisy).
+* LOCAL_POSITION_NED: the position/velocity estimate (noisy), origin = home.
+* GLOBAL_POSITION_INT: the same around ``[home]`` (flat earth), altitudes in mm.
+* ALTITUDE: ``altitude_relative``/``altitude_terrain`` = barometric altitude
+  above home (10 cm resolution + noise), ``altitude_monotonic``/
+  ``altitude_amsl`` = that + home altitude, ``altitude_local`` = -z of the
+  estimate, ``bottom_clearance`` = rangefinder if fitted, else the baro altitude.
+* DISTANCE_SENSOR (only with ``sensors.rangefinder``): downward range, cm.
+* SYS_STATUS / BATTERY_STATUS: pack voltage, current, consumed charge and
+  energy, remaining %, link error counters (SYS_STATUS ``drop_rate_comm``,
+  ``errors_comm`` and ``errors_count1..4`` = bad frames, unknown messages,
+  rejected signatures, messages for other systems).
+* HEARTBEAT: QUADROTOR / ARDUPILOTMEGA, custom mode, armed flag, MAV_STATE.
+* EXTENDED_SYS_STATE (landed state), VFR_HUD, SYSTEM_TIME (no UTC: 0),
+  SERVO_OUTPUT_RAW (rotor thrust as 1000..2000 us, linear), ATTITUDE_TARGET.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from sitl.copter.modes import GUIDED_MODES
+from sitl.copter.simulation import Simulation
+
+__all__ = ["BUILDERS", "heartbeat", "build", "autopilot_version", "TelemetryCounters"]
+
+_EARTH_RADIUS_M = 6378137.0
+_UINT16_MAX = 65535
+
+# MAV_SYS_STATUS_SENSOR bits reported present/enabled/healthy.
+_SENSORS = (0x1 | 0x2 | 0x8 | 0x20 | 0x400 | 0x800 | 0x1000 | 0x2000 | 0x8000 | 0x200000 | 0x2000000)
+
+# ArduPilot 4.8.0-dev: major << 24 | minor << 16 | patch << 8 | FIRMWARE_VERSION_TYPE_DEV (0)
+FLIGHT_SW_VERSION = (4 << 24) | (8 << 16)
+CAPABILITIES = (
+    mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+)
+
+
+class TelemetryCounters:
+    """Link statistics shown in SYS_STATUS (filled by the endpoint)."""
+
+    __slots__ = ("frames_in", "errors", "unknown", "bad_signature", "wrong_target")
+
+    def __init__(self) -> None:
+        self.frames_in = 0
+        self.errors = 0
+        self.unknown = 0
+        self.bad_signature = 0
+        self.wrong_target = 0
+
+
+def _ms(sim: Simulation) -> int:
+    return (sim.time_ns // 1_000_000) & 0xFFFFFFFF
+
+
+def heartbeat(sim: Simulation) -> mavlink.MAVLink_message:
+    """HEARTBEAT of the current mode / arming state."""
+    ap = sim.autopilot
+    base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
+    if ap.mode in GUIDED_MODES:
+        base |= mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
+    if ap.armed:
+        base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+    return mavlink.MAVLink_heartbeat_message(
+        mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, base, int(ap.mode), ap.system_status, 3)
+
+
+def _sys_status(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message:
+    b = sim.world.battery
+    total = c.frames_in + c.errors
+    drop = min(10000, int(10000 * c.errors / total)) if total else 0
+    return mavlink.MAVLink_sys_status_message(
+        _SENSORS, _SENSORS, _SENSORS, 100, int(round(b.voltage_v * 1000)), int(round(b.current_a * 100)),
+        int(round(100 * b.charge)), drop, min(c.errors, _UINT16_MAX), min(c.errors, _UINT16_MAX),
+        min(c.unknown, _UINT16_MAX), min(c.bad_signature, _UINT16_MAX), min(c.wrong_target, _UINT16_MAX), 0, 0, 0)
+
+
+def _attitude(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message:
+    i = sim.imu
+    return mavlink.MAVLink_attitude_message(_ms(sim), i.roll, i.pitch, i.yaw, i.p, i.q, i.r)
+
+
+def _attitude_quaternion(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message:
+    i = sim.imu
+    return mavlink.MAVLink_attitude_quaternion_message(_ms(sim), i.qw, i.qx, i.qy, i.qz, i.p, i.q, i.r,
+                                                       [0.0, 0.0, 0.0, 0.0])
+
+
+def _local_position(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message:
+    n = sim.nav
+    return mavlink.MAVLink_local_position_ned_message(_ms(sim), n.n, n.e, n.d, n.vn, n.ve, n.vd)
+
+
+def _heading_cdeg(sim: Simulation) -> int:
+    return int(round(math.degrees(sim.imu.yaw) * 100)) % 36000
+
+
+def _global_position(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message:
+    n = sim.nav
+    h = sim.vehicle.home
+    lat = h.lat_deg + math.degrees(n.n / _EARTH_RADIUS_M)
+    lon = h.lon_deg + math.degrees(n.e / (_EARTH_RADIUS_M * math.cos(math.radians(h.lat_deg))))
+    return mavlink.MAVLink_global_position_int_message(
+        _ms(sim), int(round(lat * 1e7)), int(round(lon * 1e7)), int(round((h.alt_m - n.d) * 1000)),
+        int(round(-n.d * 1000)), int(round(n.vn * 100)), int(round(n.ve * 100)), int(round(n.vd * 100)),
+        _heading_cdeg(sim))
+
+
+def _altitude(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message:
+    n = sim.nav
+    home = sim.vehicle.home.alt_m
+    baro = n.baro_alt_m
+    clearance = n.range_m if n.range_m >= 0 else baro
+    return mavlink.MAVLink_altitude_message(sim.time_ns // 1000, home + baro, home + baro, -n.d, baro, baro,
+                                            clearance)
+
+
+def _distance_sensor(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message | None:
+    sp = sim.vehicle.sensors
+    if not sp.rangefinder:
+        return None
+    r = sim.nav.range_m
+    cur = int(round(r * 100)) if r >= 0 else int(round(sp.rangefinder_max_m * 100)) + 1
+    return mavlink.MAVLink_distance_sensor_message(
+        _ms(sim), 2, int(round(sp.rangefinder_max_m * 100)), cur, mavlink.MAV_DISTANCE_SENSOR_ULTRASOUND, 0,
+        mavlink.MAV_SENSOR_ROTATION_PITCH_270, 255, 0.0, 0.0, [0.0, 0.0, 0.0, 0.0], 0)
+
+
+def _battery_status(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message:
+    b = sim.world.battery
+    cells = sim.vehicle.battery.cells
+    cell_mv = int(round(b.voltage_v / cells * 1000))
+    volts = [cell_mv if i < cells else _UINT16_MAX for i in range(10)]
+    charge_state = mavlink.MAV_BATTERY_CHARGE_STATE_OK
+    low = sim.params["BATT_LOW_VOLT"]
+    if low > 0 and b.voltage_v < low:
+        charge_state = mavlink.MAV_BATTERY_CHARGE_STATE_LOW
+    return mavlink.MAVLink_battery_status_message(
+        0, mavlink.MAV_BATTERY_FUNCTION_ALL, mavlink.MAV_BATTERY_TYPE_LIPO, 32767, volts,
+        int(round(b.current_a * 100)), int(round(b.consumed_mah)), int(round(b.consumed_wh * 36)),
+        int(round(100 * b.charge)), 0, charge_state, [0, 0, 0, 0], 0, 0)
+
+
+def _system_time(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message:
+    return mavlink.MAVLink_system_time_message(0, _ms(sim))
+
+
+def _vfr_hud(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message:
+    n = sim.nav
+    gs = math.hypot(n.vn, n.ve)
+    hdg = int(round(math.degrees(sim.imu.yaw))) % 360
+    return mavlink.MAVLink_vfr_hud_message(gs, gs, hdg, int(round(100 * sim.autopilot.throttle)),
+                                           sim.vehicle.home.alt_m - n.d, -n.vd)
+
+
+def _extended_sys_state(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message:
+    return mavlink.MAVLink_extended_sys_state_message(mavlink.MAV_VTOL_STATE_UNDEFINED, sim.autopilot.landed_state)
+
+
+def _servo_output_raw(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message:
+    tmax = sim.vehicle.rotors.max_thrust_n
+    armed = sim.autopilot.armed
+    pwm = [int(round(1000 + 1000 * t / tmax)) if armed else 1000 for t in sim.autopilot.rotor_cmd_n]
+    return mavlink.MAVLink_servo_output_raw_message((sim.time_ns // 1000) & 0xFFFFFFFF, 0, *pwm,
+                                                    0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0)
+
+
+def _attitude_target(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message:
+    ap = sim.autopilot
+    r = ap.rate_target
+    return mavlink.MAVLink_attitude_target_message(_ms(sim), 0, list(ap.att_target_q), r[0], r[1], r[2],
+                                                   ap.throttle)
+
+
+def autopilot_version(sim: Simulation) -> mavlink.MAVLink_message:
+    """AUTOPILOT_VERSION (answer to MAV_CMD_REQUEST_MESSAGE 148 / REQUEST_AUTOPILOT_CAPABILITIES)."""
+    return mavlink.MAVLink_autopilot_version_message(
+        CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0, [0] * 18)
+
+
+BUILDERS: dict[int, Callable[[Simulation, TelemetryCounters], mavlink.MAVLink_message | None]] = {
+    mavlink.MAVLINK_MSG_ID_HEARTBEAT: lambda sim, c: heartbeat(sim),
+    mavlink.MAVLINK_MSG_ID_SYS_STATUS: _sys_status,
+    mavlink.MAVLINK_MSG_ID_SYSTEM_TIME: _system_time,
+    mavlink.MAVLINK_MSG_ID_ATTITUDE: _attitude,
+    mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: _attitude_quaternion,
+    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: _local_position,
+    mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: _global_position,
+    mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: _servo_output_raw,
+    mavlink.MAVLINK_MSG_ID_VFR_HUD: _vfr_hud,
+    mavlink.MAVLINK_MSG_ID_ATTITUDE_TARGET: _attitude_target,
+    mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR: _distance_sensor,
+    mavlink.MAVLINK_MSG_ID_ALTITUDE: _altitude,
+    mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: _battery_status,
+    mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: _extended_sys_state,
+}
+
+
+def build(msg_id: int, sim: Simulation, counters: TelemetryCounters) -> mavlink.MAVLink_message | None:
+    """The message ``msg_id`` for the current state, or None (unsupported / not fitted)."""
+    f = BUILDERS.get(msg_id)
+    return f(sim, counters) if f is not None else None
