@@ -169,7 +169,8 @@ def main(argv=None) -> int:
         lines.append(f"  --workers {w}: {t['runs']} flights ({t['failed']} failed), {t['vehicle_s']:.0f} vehicle-s in "
                      f"{t['wall_s']:.1f} s of flights = {tp[w]:.2f} vehicle-s per wall s; whole command "
                      f"{c['command_wall_s']:.1f} s")
-    lines.append(f"  baseline, the same flights in-process (gcs.sim.run_experiment): {base['vehicle_s']:.0f} vehicle-s in "
+    lines.append(f"  baseline, the same flights in-process (gcs.sim.run_experiment): "
+                 f"{base['vehicle_s']:.0f} vehicle-s in "
                  f"{base['wall_s']:.1f} s = {base['throughput']:.1f} vehicle-s per wall s "
                  f"(campaign at {tp[1] / base['throughput']:.2f} / {tp[2] / base['throughput']:.2f} of it)")
     lines.append(f"full paper campaign: 3 experiments x {PAPER_CONTROLLERS} controllers x {PAPER_RUNS} runs "
@@ -177,13 +178,14 @@ def main(argv=None) -> int:
     lines.append(f"  {'experiment':<17} {'lockstep x RT':>13} {'overhead/run':>13} {'landing':>8} {'wall/run':>9} "
                  f"{'40 runs':>8}   (--workers 2)")
     for exp, e in d["extrapolation"][2]["experiments"].items():
-        lines.append(f"  {exp:<17} {e['lockstep_speed']:>12.1f}x {e['overhead_s']:>12.1f}s {e['landing_tail_s']:>7.1f}s "
-                     f"{e['full_run_wall_s']:>8.1f}s {e['runs_wall_s']:>7.0f}s")
+        lines.append(f"  {exp:<17} {e['lockstep_speed']:>12.1f}x {e['overhead_s']:>12.1f}s "
+                     f"{e['landing_tail_s']:>7.1f}s {e['full_run_wall_s']:>8.1f}s {e['runs_wall_s']:>7.0f}s")
     for w in (1, 2):
         e = d["extrapolation"][w]
         lines.append(f"  --workers {w}: parallel speed-up {e['parallel_speedup']:.2f}, fixed {e['fixed_s']:.1f} s -> "
                      f"~{e['wall_s']:.0f} s ({e['wall_s'] / 60:.1f} min) -> {met_text(e['wall_s'] <= TARGET_WALL_S)}")
-    lines.append(f"  baseline in-process (one process): ~{base['full_wall_s']:.0f} s ({base['full_wall_s'] / 60:.1f} min)")
+    lines.append(f"  baseline in-process (one process): ~{base['full_wall_s']:.0f} s "
+                 f"({base['full_wall_s'] / 60:.1f} min)")
     emit(document("campaign", args.quick, d, rows), "\n".join(lines), args.json)
     return 0
 

@@ -55,7 +55,7 @@ def bench_policy(config, name: str, batches: int, per_batch: int) -> float:
               for _ in range(per_batch)]
     ref = State(z=2.0, vz=0.1)
     times = []
-    for b in range(batches):
+    for _ in range(batches):
         t0 = time.perf_counter()
         for i, s in enumerate(states):
             ctl.step(100 + i, s, ref)
@@ -215,7 +215,8 @@ def main(argv=None) -> int:
                                                   if have else f"{'-':>10} {'-':>9} {'-':>11} {'-':>10}"))
     unsettled = [f"{x['config']} {x['subsystem']}" for x in lqr if not x["settled_within_horizon"]]
     if unsettled:
-        lines.append(f"not at the fixed point within the horizon (the whole horizon is computed): {', '.join(unsettled)}")
+        lines.append(f"not at the fixed point within the horizon (the whole horizon is computed): "
+                     f"{', '.join(unsettled)}")
     emit(document("control", args.quick, data, rows), "\n".join(lines), args.json)
     return 0
 

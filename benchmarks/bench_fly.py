@@ -110,7 +110,8 @@ def breakdown_lines(title: str, cols: dict[str, dict]) -> list[str]:
     head = f"  {'stage':<9}" + "".join(f" {name + ' p50':>16} {'p99':>8}" for name in cols)
     lines = [title, head]
     for stage in STAGES + ("tick",):
-        lines.append(f"  {stage:<9}" + "".join(f" {lp[stage + '_p50_ms'] * 1000:>14.1f}us {lp[stage + '_p99_ms'] * 1000:>6.0f}us"
+        lines.append(f"  {stage:<9}" + "".join(f" {lp[stage + '_p50_ms'] * 1000:>14.1f}us"
+                                               f" {lp[stage + '_p99_ms'] * 1000:>6.0f}us"
                                                for lp in cols.values()))
     return lines
 
@@ -158,15 +159,20 @@ def main(argv=None) -> int:
         row("lockstep control stage p50 (--no-log)", ln["control_p50_ms"] * 1000, "us",
             baseline="controller.step alone", baseline_value=d["bare_ms"]["control"] * 1000),
     ]
-    lines = [f"lockstep, {CONFIG} {duration:g} s, {CONTROLLER}, whole GCS in the loop, seeds {', '.join(map(str, seeds))}: "
+    lines = [f"lockstep, {CONFIG} {duration:g} s, {CONTROLLER}, whole GCS in the loop, "
+             f"seeds {', '.join(map(str, seeds))}: "
              f"median {d['lockstep_ratio_log']:.1f}x real time with the log "
-             f"(runs {', '.join(f'{r:.1f}' for r in d['lockstep_ratios_log'])}), {d['lockstep_ratio_no_log']:.1f}x --no-log; "
+             f"(runs {', '.join(f'{r:.1f}' for r in d['lockstep_ratios_log'])}), "
+             f"{d['lockstep_ratio_no_log']:.1f}x --no-log; "
              f"target >= {TARGET_LOCKSTEP:g}x -> {met_text(d['lockstep_ratio_log'] >= TARGET_LOCKSTEP)}",
-             f"baseline, the same mission in-process (gcs.sim.simulate, no link): {d['in_process_ratio']:.1f}x real time "
+             f"baseline, the same mission in-process (gcs.sim.simulate, no link): "
+             f"{d['in_process_ratio']:.1f}x real time "
              f"-> lockstep flight at {d['lockstep_ratio_log'] / d['in_process_ratio']:.2f} of it",
-             f"wall time per tick {d['wall_per_tick_us_log']:.0f} us with the log ({d['wall_per_tick_us_no_log']:.0f} us "
+             f"wall time per tick {d['wall_per_tick_us_log']:.0f} us with the log "
+             f"({d['wall_per_tick_us_no_log']:.0f} us "
              f"--no-log; in-process {d['in_process_wall_per_tick_us']:.0f} us): the tick's own work (p50 "
-             f"{lo['tick_p50_ms'] * 1000:.0f} us) is {lo['tick_p50_ms'] * 1000 / d['wall_per_tick_us_log']:.0%} of it, the rest "
+             f"{lo['tick_p50_ms'] * 1000:.0f} us) is "
+             f"{lo['tick_p50_ms'] * 1000 / d['wall_per_tick_us_log']:.0%} of it, the rest "
              f"is the wait for the SITL's step (its physics, the round trip; telemetry is decoded while waiting)",
              *breakdown_lines("lockstep tick breakdown (median over flights of each flight's p50 / p99):",
                               {"with log": lo, "--no-log": ln}),
@@ -180,7 +186,8 @@ def main(argv=None) -> int:
         ok = lp["deadline_misses"] == 0 and lp["jitter_p99_ms"] <= 1.0 and lp["tick_p99_ms"] <= 1.0
         rows += [row("real time: deadline misses", lp["deadline_misses"], "", target="0",
                      met=lp["deadline_misses"] == 0),
-                 row("real time: jitter p99", lp["jitter_p99_ms"], "ms", target="<= 1 ms", met=lp["jitter_p99_ms"] <= 1.0),
+                 row("real time: jitter p99", lp["jitter_p99_ms"], "ms", target="<= 1 ms",
+                     met=lp["jitter_p99_ms"] <= 1.0),
                  row("real time: tick p99", lp["tick_p99_ms"], "ms", baseline="lockstep tick p99 with log",
                      baseline_value=lo["tick_p99_ms"], target="<= 1 ms", met=lp["tick_p99_ms"] <= 1.0)]
         lines += [f"real time, {doc['duration_s']:g} s: {lp['ticks']} ticks, {lp['deadline_misses']} deadline misses, "

@@ -98,7 +98,7 @@ def bench_send_link(pair: Pair, batches: int) -> float:
     link, sps = pair.link, _setpoints(PAIRS)
     mav, ts, tc = link.mav, link.target_system, link.target_component
     times = []
-    for b in range(batches):
+    for _ in range(batches):
         t0 = time.perf_counter()
         for i, (q, rr, pr, yr, th) in enumerate(sps):
             link.send(mav.set_attitude_target_encode(i, ts, tc, 0, q, rr, pr, yr, th))
@@ -112,7 +112,7 @@ def bench_send_raw(pair: Pair, batches: int, with_socket: bool) -> float:
     mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
     sps, sock, dest = _setpoints(PAIRS), pair.vehicle, pair.raw_rx_addr
     times = []
-    for b in range(batches):
+    for _ in range(batches):
         t0 = time.perf_counter()
         if with_socket:
             for i, (q, rr, pr, yr, th) in enumerate(sps):
@@ -130,7 +130,7 @@ def bench_drain_link(pair: Pair, batches: int) -> tuple[float, int]:
     frames = _vehicle_frames(PAIRS)
     link, sock, dest = pair.link, pair.vehicle, pair.link_addr
     times, lost = [], 0
-    for b in range(batches):
+    for _ in range(batches):
         for f in frames:
             sock.sendto(f, dest)
         t0 = time.perf_counter()
@@ -149,7 +149,7 @@ def bench_decode_raw(pair: Pair, batches: int, with_socket: bool) -> float:
     mav.robust_parsing = True  # as the link parses
     sock, rx, dest = pair.vehicle, pair.raw_rx, pair.raw_rx_addr
     times = []
-    for b in range(batches):
+    for _ in range(batches):
         n = 0
         if with_socket:
             for f in frames:
@@ -208,9 +208,11 @@ def main(argv=None) -> int:
     text = "\n".join([
         f"MAVLink 2 over UDP loopback, per message; median of {batches} batches of {PAIRS} frame pairs",
         f"{'':<44} {'MavlinkLink':>12} {'raw+socket':>11} {'raw codec':>10} {'link/raw':>9}",
-        f"{'up:   SET_ATTITUDE_TARGET (encode+send)':<44} {d['send_link_us']:>10.1f}us {d['send_raw_socket_us']:>9.1f}us "
+        f"{'up:   SET_ATTITUDE_TARGET (encode+send)':<44} {d['send_link_us']:>10.1f}us "
+        f"{d['send_raw_socket_us']:>9.1f}us "
         f"{d['send_raw_codec_us']:>8.1f}us {d['send_link_us'] / d['send_raw_codec_us']:>8.2f}x",
-        f"{'down: ATTITUDE + LOCAL_POSITION_NED (drain)':<44} {d['drain_link_us']:>10.1f}us {d['decode_raw_socket_us']:>9.1f}us "
+        f"{'down: ATTITUDE + LOCAL_POSITION_NED (drain)':<44} {d['drain_link_us']:>10.1f}us "
+        f"{d['decode_raw_socket_us']:>9.1f}us "
         f"{d['decode_raw_codec_us']:>8.1f}us {d['drain_link_us'] / d['decode_raw_codec_us']:>8.2f}x",
         f"{'one 100 Hz tick (1 up + 2 down)':<44} {d['tick_link_us']:>10.1f}us {d['tick_raw_socket_us']:>9.1f}us "
         f"{d['tick_raw_codec_us']:>8.1f}us {d['tick_link_us'] / d['tick_raw_codec_us']:>8.2f}x",

@@ -36,7 +36,7 @@ import numpy as np
 from benchlib import document, emit, row
 from gcs.config import load_config
 from gcs.control import make_controller
-from gcs.log import FlightLog
+from gcs.log.writer import FlightLog
 from gcs.log.meta import write_run_header
 from gcs.log.review import log_metrics
 from gcs.log.records import LoopTiming
@@ -285,16 +285,22 @@ def main(argv=None) -> int:
         out["metrics_flight_log_s"], out["metrics_flight_log_cli_s"] = time_metrics(flight_path, repeats)
     lines = []
     print_ = lines.append
-    ok = lambda v, target: "ok" if v <= target else "MISSED"
+
+    def ok(v, target):
+        return "ok" if v <= target else "MISSED"
+
     print_(f"python {sys.version.split()[0]}, {os.cpu_count()} CPU(s); medians")
     print_(f"log one control tick, 6 messages (state, reference, error, command, horizon, truth): "
-           f"{out['tick_6msg_median_us']:.1f} us ({out['tick_6msg_cpu_us']:.1f} us CPU)  (target <= {TARGET_TICK_US:g} us: "
+           f"{out['tick_6msg_median_us']:.1f} us ({out['tick_6msg_cpu_us']:.1f} us CPU)  "
+           f"(target <= {TARGET_TICK_US:g} us: "
            f"{ok(out['tick_6msg_median_us'], TARGET_TICK_US)})")
     print_(f"log one flight-like tick, 13 messages (+ limited command, cost, timing, 3 MAVLink + raw): "
            f"{out['tick_13msg_median_us']:.1f} us ({out['tick_13msg_cpu_us']:.1f} us CPU)")
     print_(f"gcs fly: logging one control tick (recorder -> writer process; 3 MAVLink frames + the tick): "
-           f"median {out['fly_log_back_to_back_median_us']:.1f} us back to back (p99 {out['fly_log_back_to_back_p99_us']:.0f}), "
-           f"{out['fly_log_paced_100hz_median_us']:.1f} us paced at 100 Hz (p99 {out['fly_log_paced_100hz_p99_us']:.0f}) "
+           f"median {out['fly_log_back_to_back_median_us']:.1f} us back to back "
+           f"(p99 {out['fly_log_back_to_back_p99_us']:.0f}), "
+           f"{out['fly_log_paced_100hz_median_us']:.1f} us paced at 100 Hz "
+           f"(p99 {out['fly_log_paced_100hz_p99_us']:.0f}) "
            f"(target <= {TARGET_TICK_US:g} us: {ok(out['fly_log_paced_100hz_median_us'], TARGET_TICK_US)}); "
            f"baseline at 100 Hz: estimator + nlsoc step {out['paced_100hz_estimate_control_median_us']:.1f} us; "
            f"records dropped {out['fly_log_back_to_back_dropped'] + out['fly_log_paced_100hz_dropped']}")
@@ -322,7 +328,8 @@ def _rows(out: dict, minutes: float) -> list[dict]:
             baseline="its CPU time", baseline_value=out["tick_6msg_cpu_us"], target=f"<= {TARGET_TICK_US:g} us",
             met=out["tick_6msg_median_us"] <= TARGET_TICK_US),
         row("gcs fly: log one tick, paced at 100 Hz", out["fly_log_paced_100hz_median_us"], "us",
-            baseline="estimator + nlsoc step, same pacing", baseline_value=out["paced_100hz_estimate_control_median_us"],
+            baseline="estimator + nlsoc step, same pacing",
+            baseline_value=out["paced_100hz_estimate_control_median_us"],
             target=f"<= {TARGET_TICK_US:g} us", met=out["fly_log_paced_100hz_median_us"] <= TARGET_TICK_US,
             note=f"p99 {out['fly_log_paced_100hz_p99_us']:.0f} us"),
         row("gcs fly: log one tick, back to back", out["fly_log_back_to_back_median_us"], "us",
@@ -332,15 +339,17 @@ def _rows(out: dict, minutes: float) -> list[dict]:
             baseline="no log", baseline_value=out["sim_realtime_ratio_none"]),
         row("simulation with in-process log (x real time)", out["sim_realtime_ratio_inline"], "x",
             baseline="no log", baseline_value=out["sim_realtime_ratio_none"]),
-        row(f"gcs sim-like run, 3 x {out['sim_runs_flight_s']:g} s, background log", out["sim_runs_wall_s_background_log"],
-            "s", baseline="no log", baseline_value=out["sim_runs_wall_s_no_log"]),
+        row(f"gcs sim-like run, 3 x {out['sim_runs_flight_s']:g} s, background log",
+            out["sim_runs_wall_s_background_log"], "s",
+            baseline="no log", baseline_value=out["sim_runs_wall_s_no_log"]),
     ]
     full = minutes >= 10.0
     for kind in ("sim", "flight"):
         cli = out[f"metrics_{kind}_log_cli_s"]
         rows.append(row(f"gcs log metrics, {minutes:g}-minute {kind} log (command)", cli, "s",
                         baseline="library call (no interpreter start)", baseline_value=out[f"metrics_{kind}_log_s"],
-                        target=f"<= {TARGET_METRICS_S:g} s (10-minute log)", met=(cli <= TARGET_METRICS_S) if full else None,
+                        target=f"<= {TARGET_METRICS_S:g} s (10-minute log)",
+                        met=(cli <= TARGET_METRICS_S) if full else None,
                         note="" if full else f"--quick: not judged; x{10.0 / minutes:g} for 10 minutes: "
                                              f"~{cli + (10.0 / minutes - 1) * out[f'metrics_{kind}_log_s']:.1f} s"))
     return rows

@@ -147,7 +147,7 @@ def bench_lockstep(steps: int, baud: int) -> float:
             t0 = time.perf_counter()
             for k in range(1, steps + 1):
                 port.write(rp.encode(rp.Control(k, 9.9)))
-                wait(lambda m: isinstance(m, rp.Telemetry) and m.control_seq == k and m.time_us % 10_000 == 0)
+                wait(lambda m, k=k: isinstance(m, rp.Telemetry) and m.control_seq == k and m.time_us % 10_000 == 0)
             return steps / (time.perf_counter() - t0)
         finally:
             port.close()

@@ -3,7 +3,7 @@
 Run: ``python benchmarks/bench_soak.py [--quick] [--json]``.
 
 The proxy and the acceptance rules are the hostile-link suite's (``tests/hostile/mitm.py``,
-``tests/hostile/hostile_kit.py``): every datagram both ways goes through seeded faults — random
+``tests/hostile/hostile_kit/``): every datagram both ways goes through seeded faults — random
 datagrams (up to 1400 B), garbage dense in 0xFD/0xFE frame starts, 1-byte 0xFD datagrams, garbage
 inside datagrams, bit flips (bad CRCs), truncations, copies, reordering, frames of other system
 ids, valid frames with NaN/inf fields from the vehicle's address and from a second address, and
@@ -85,7 +85,7 @@ def main(argv=None) -> int:
             injected += o.proxy["injected_bytes"]
             mutated += o.proxy["mutated_bytes"]
             for name, f in o.proxy["faults"].items():
-                d = per_fault.setdefault(name, {k: 0 for k in f})
+                d = per_fault.setdefault(name, dict.fromkeys(f, 0))
                 for k, v in f.items():
                     d[k] += v
             m = o.monitor
@@ -135,7 +135,7 @@ def main(argv=None) -> int:
                      f"{f['injected_datagrams']:>11} {f['dropped_datagrams']:>8}")
     lines.append("per flight:")
     for f in flights:
-        lines.append(f"  {f['flight']:>2} {f['controller']:<6} exit {f['rc']!s:>4} {str(f['reason']):<18} "
+        lines.append(f"  {f['flight']:>2} {f['controller']:<6} exit {f['rc']!s:>4} {f['reason']!s:<18} "
                      f"{f['wall_s']:6.1f} s  {f['realtime_ratio'] or 0:5.1f}x  {f['injected_bytes']:>10} B  "
                      f"cmds {f['commands_checked']:>5} bad {f['bad_commands']}"
                      + (f"  | {f['problems'][0][:150]}" if f["problems"] else ""))

@@ -19,7 +19,7 @@ import math
 import statistics
 import sys
 import time
-from typing import Callable, Iterable
+from collections.abc import Callable, Iterable
 
 
 def median_us(fn: Callable[[], None], per_call: int, repeats: int) -> float:

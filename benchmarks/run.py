@@ -30,14 +30,15 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 #: Report order; any other bench_*.py found follows.
-ORDER = ("control", "fly", "link", "sitl", "log", "campaign", "rig")
+ORDER = ("control", "fly", "link", "sitl", "log", "campaign", "rig", "firmware")
 TITLES = {"control": "Controller step and gain design (bench_control.py)",
           "fly": "gcs fly: lockstep speed and the loop tick (bench_fly.py)",
           "link": "Link overhead: MavlinkLink vs raw pymavlink (bench_link.py)",
           "sitl": "SITL speed vs the in-process loop (bench_sitl.py)",
           "log": "Logging cost and log review time (bench_log.py)",
           "campaign": "Campaign throughput (bench_campaign.py)",
-          "rig": "Indoor rig protocol and emulator (bench_rig.py)"}
+          "rig": "Indoor rig protocol and emulator (bench_rig.py)",
+          "firmware": "ArduCopter SITL in the loop: reliable speed-up (bench_firmware.py)"}
 
 
 def benches(only: list[str] | None) -> list[Path]:
@@ -55,10 +56,11 @@ def machine(quick: bool) -> dict:
         except (OSError, subprocess.SubprocessError):
             return ""
 
-    return {"date_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+    return {"date_utc": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
             "cpu_count": os.cpu_count(), "python": sys.version.split()[0], "platform": platform.platform(),
             "load_start": os.getloadavg(), "quick": quick,
-            "commit": git("rev-parse", "--short", "HEAD") + (" (modified tree)" if git("status", "--porcelain") else "")}
+            "commit": git("rev-parse", "--short", "HEAD")
+            + (" (modified tree)" if git("status", "--porcelain") else "")}
 
 
 def run_bench(path: Path, extra: list[str]) -> dict:
@@ -107,7 +109,8 @@ def met_cell(met) -> str:
 
 def bench_table(doc: dict) -> list[str]:
     if doc.get("failed"):
-        return ["Failed: " + "`" + doc["failed"].strip().splitlines()[-1][:300] + "`" if doc["failed"].strip() else "Failed."]
+        return ["Failed: " + "`" + doc["failed"].strip().splitlines()[-1][:300] + "`"
+                if doc["failed"].strip() else "Failed."]
     if doc.get("skipped"):
         return [f"Skipped: {doc['skipped']}."]
     out = ["| figure | value | baseline | baseline value | ratio | target | met |",
@@ -148,7 +151,8 @@ def tick_table(docs: dict) -> list[str]:
                  link.get("send_raw_codec_us")),
         "log": (log.get("fly_log_paced_100hz_median_us"), "FlightRecorder tick, paced at 100 Hz (bench_log)", None),
     }
-    out = [f"`gcs fly` ({fly.get('config')}, {fly.get('controller')}; lockstep {fmt(fly.get('duration_s'))} s missions, "
+    out = [f"`gcs fly` ({fly.get('config')}, {fly.get('controller')}; "
+           f"lockstep {fmt(fly.get('duration_s'))} s missions, "
            f"medians over flights of each flight's p50 / p99), each stage beside its part measured alone:", "",
            "| stage | " + " | ".join(f"p50 {n} | p99 {n}" for n, _ in cols)
            + f" | share of tick p50 ({share_col[0]}) | part alone | what | raw pymavlink |",
@@ -164,8 +168,10 @@ def tick_table(docs: dict) -> list[str]:
     if fly.get("wall_per_tick_us_log"):
         w, t = fly["wall_per_tick_us_log"], fly["loop_log"]["tick_p50_ms"] * 1000
         out += ["", f"In lockstep a tick takes {fmt(w, 'us')} of wall time (in-process simulation: "
-                    f"{fmt(fly.get('in_process_wall_per_tick_us'), 'us')}); the tick's own work (p50 {fmt(t, 'us')}) is "
-                    f"{100 * t / w:.0f} % of it, the rest is the wait for the SITL's step (its physics, the round trip, "
+                    f"{fmt(fly.get('in_process_wall_per_tick_us'), 'us')}); "
+                    f"the tick's own work (p50 {fmt(t, 'us')}) is "
+                    f"{100 * t / w:.0f} % of it, the rest is the wait for the SITL's step "
+                    f"(its physics, the round trip, "
                     f"and the telemetry, decoded while waiting: hence the small lockstep decode stage)."]
     out += ["", "The stages' p50s need not add up to the tick's p50 (medians of different samples). "
             "Logging shows in every stage: MAVLink frames are recorded as they are received (decode) and sent (send)."]
@@ -179,7 +185,8 @@ def targets_summary(results: list[dict]) -> list[str]:
             if row.get("met") is True:
                 met.append(f"{r['name']}: {row['figure']}")
             elif row.get("met") is False:
-                missed.append(f"{r['name']}: {row['figure']} = {fmt(row['value'], row['unit'])} (target {row['target']})")
+                missed.append(f"{r['name']}: {row['figure']} = {fmt(row['value'], row['unit'])} "
+                              f"(target {row['target']})")
     out = [f"{len(met)} targets met, {len(missed)} missed."]
     if missed:
         out += ["", "Missed:", ""] + [f"- {m}" for m in missed]
@@ -240,7 +247,8 @@ def main(argv: list[str] | None = None) -> int:
     (out_dir / "latest.txt").write_text(head + "\n\n" + "\n\n".join(
         f"== {r['file']} ({r['doc']['wall_s']:.0f} s)\n{r['text']}"
         + (f"\nFAILED: {r['doc']['failed']}" if r["doc"].get("failed") else "") for r in results) + "\n")
-    (out_dir / "latest.json").write_text(json.dumps({"machine": mach, "benchmarks": {r["name"]: r["doc"] for r in results}},
+    (out_dir / "latest.json").write_text(json.dumps({"machine": mach,
+                                                     "benchmarks": {r["name"]: r["doc"] for r in results}},
                                                     indent=1, allow_nan=True) + "\n")
     (out_dir / "REPORT.md").write_text(report_md(mach, results))
     print(f"wrote {out_dir / 'latest.txt'}, {out_dir / 'latest.json'} and {out_dir / 'REPORT.md'}")

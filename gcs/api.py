@@ -21,15 +21,15 @@ from __future__ import annotations
 
 import dataclasses
 import traceback
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 from gcs.config import Config, load_config
 from gcs.control import CONTROLLERS, make_controller
 from gcs.errors import LogError, PreflightRefused
 from gcs.flight.context import Interrupts
 from gcs.flight.flight import Flight
+from gcs.flight.spec import DEFAULT_CONFIG, DEFAULT_RIG_CONFIG, FIRMWARE_SITLS, VEHICLES, FlightSpec
 from gcs.log.meta import default_log_path, run_attachments, run_metadata
 from gcs.log.recorder import BYTES_PER_FLIGHT_TICK, FlightRecorder, utc_offset_ns
 from gcs.flight.result import FlightResult
@@ -40,147 +40,16 @@ from gcs.link.rig import RigLink, rig_link_budget
 from gcs.log.sink import BackgroundSink
 from gcs.mission import Mission
 from gcs.sim import ExperimentResult, SimOptions, run_experiment
+from gcs.vehicles.arducopter_sitl import ArduCopterSitl
 from gcs.vehicles.embedded import EmbeddedRig, EmbeddedSitl
 from gcs.vehicles.mavlink import MavlinkSession
 from gcs.vehicles.rig import RigSession
 from quadrotor.clock import MonotonicClock
-from quadrotor.errors import ConfigError
 
-__all__ = ["FlightSpec", "fly", "simulate", "VEHICLES", "DEFAULT_CONFIG", "DEFAULT_RIG_CONFIG"]
+__all__ = ["FlightSpec", "fly", "simulate", "VEHICLES", "FIRMWARE_SITLS", "DEFAULT_CONFIG", "DEFAULT_RIG_CONFIG"]
 
-DEFAULT_CONFIG = "outdoor-circle"
-DEFAULT_RIG_CONFIG = "indoor-4dof"
-#: ``mavlink``: an autopilot on ``port``/``connect``, or the built-in SITL without either; ``rig``: the 4-DOF rig.
-VEHICLES = ("mavlink", "rig")
-
-
-@dataclass(frozen=True)
-class FlightSpec:
-    """Everything one flight needs (the fields of ``gcs fly``'s options).
-
-    Attributes
-    ----------
-    controller : str
-    config : str, Path or Config
-        A bundled name, a TOML path or a loaded config (default ``outdoor-circle``; ``indoor-4dof``
-        for the rig).
-    vehicle : {"mavlink", "rig"}
-    port, connect : str or None
-        A serial device, or a pymavlink URL (``udpin:``, ``udpout:``, ``tcp:``); neither: the built-in
-        SITL (or the rig emulator) as a child process.
-    baud : int or None
-        Serial baud rate (default 57600; 115200 for the rig).
-    lockstep : bool
-        The vehicle steps once per setpoint (the built-in SITL's lockstep; an external lockstep SITL).
-    seed : int
-        The child simulator's seed.
-    sitl_args : tuple of str
-        More options for the child simulator (``--wind=2,90,0.5,2``, ``--start-attitude=1,2,3``).
-    target_system, target_component : int
-    signing_key : bytes or None
-    output, telemetry_rate_hz, stale_timeout_s : optional ``[flight]`` overrides
-    duration_s : float or None
-        Cut the mission at this time, then land.
-    force_budget : bool
-        Fly a serial link whose budget does not fit.
-    log : bool
-        Write an MCAP flight log; ``log_path`` where (default ``logs/<UTC>_<controller>_<experiment>.mcap``).
-    metadata : dict
-        Added to the log's ``flight`` metadata (e.g. the command line).
-    """
-
-    controller: str = "nlsoc"
-    config: str | Path | Config | None = None
-    vehicle: str = "mavlink"
-    port: str | None = None
-    connect: str | None = None
-    baud: int | None = None
-    lockstep: bool = False
-    seed: int = 0
-    sitl_args: tuple[str, ...] = ()
-    target_system: int = 1
-    target_component: int = 1
-    signing_key: bytes | None = None
-    output: str | None = None
-    telemetry_rate_hz: float | None = None
-    stale_timeout_s: float | None = None
-    duration_s: float | None = None
-    force_budget: bool = False
-    log: bool = True
-    log_path: str | Path | None = None
-    metadata: dict = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        if self.vehicle not in VEHICLES:
-            raise ConfigError("vehicle", "", f"must be one of {', '.join(VEHICLES)}, got {self.vehicle!r}")
-        if self.port is not None and self.connect is not None:
-            raise ConfigError("--port/--connect", "", "give one of them, not both")
-        if self.vehicle == "rig" and (self.connect is not None or self.signing_key is not None or self.output):
-            raise ConfigError("--connect/--signing-key/--output", "", "not used with the rig (it takes CONTROL frames "
-                                                                      "on a serial port: --port)")
-
-    @property
-    def builtin(self) -> bool:
-        """The vehicle is the child simulator (no port, no URL)."""
-        return self.port is None and self.connect is None
-
-    def to_json(self) -> dict:
-        """A JSON document of the spec (a loaded Config is given by its source path; the key in hex)."""
-        doc = dataclasses.asdict(self)
-        doc["config"] = self.config.source if isinstance(self.config, Config) else (
-            None if self.config is None else str(self.config))
-        doc["log_path"] = None if self.log_path is None else str(self.log_path)
-        doc["signing_key"] = None if self.signing_key is None else self.signing_key.hex()
-        doc["sitl_args"] = list(self.sitl_args)
-        return doc
-
-    @classmethod
-    def from_json(cls, doc: dict) -> "FlightSpec":
-        d = dict(doc)
-        d["sitl_args"] = tuple(d.get("sitl_args", ()))
-        if d.get("signing_key") is not None:
-            d["signing_key"] = bytes.fromhex(d["signing_key"])
-        return cls(**d)
-
-    def command_line(self, summary: str | None = None) -> list[str]:
-        """The equivalent ``gcs fly`` command line (documentation: what a user types to fly the same)."""
-        out = ["gcs", "fly"]
-        if self.vehicle == "rig":
-            out += ["--rig", "4dof"]
-        if self.config is not None:
-            out += ["--config", self.config.source if isinstance(self.config, Config) else str(self.config)]
-        out += ["--controller", self.controller]
-        opts = (("--port", self.port), ("--connect", self.connect), ("--baud", self.baud),
-                ("--output", self.output), ("--telemetry-rate", self.telemetry_rate_hz),
-                ("--stale-timeout", self.stale_timeout_s), ("--duration", self.duration_s))
-        if self.builtin:
-            out += ["--sitl", "lockstep" if self.lockstep else "realtime", "--seed", str(self.seed)]
-            out += [f"--sitl-arg={a}" for a in self.sitl_args]
-        elif self.lockstep:
-            out.append("--lockstep")
-        for flag, value in opts:
-            if value is not None:
-                out += [flag, f"{value:g}" if isinstance(value, float) else str(value)]
-        if self.force_budget:
-            out.append("--force-budget")
-        if summary:
-            out += ["--summary", summary]
-        out += ["--log", str(self.log_path)] if self.log and self.log_path else ([] if self.log else ["--no-log"])
-        return out
-
-    def resolved_config(self) -> Config:
-        """The config as flown: the file plus this spec's overrides (recorded in its raw document)."""
-        base = self.config if self.config is not None else (DEFAULT_RIG_CONFIG if self.vehicle == "rig"
-                                                            else DEFAULT_CONFIG)
-        config = base if isinstance(base, Config) else load_config(base)
-        changes = {k: v for k, v in (("telemetry_rate_hz", self.telemetry_rate_hz),
-                                     ("telemetry_stale_s", self.stale_timeout_s), ("output", self.output))
-                   if v is not None}
-        if changes:
-            config = config.with_changes("flight", **changes)
-        if self.duration_s is not None:
-            config = config.with_duration(self.duration_s)
-        return config
+#: Speed-up at which a firmware SITL started by ``gcs fly`` boots (then SIM_SPEEDUP = the flight's).
+BOOT_SPEEDUP = 10.0
 
 
 def fly(spec: FlightSpec, *, console: Callable[[str], None] | None = None, interrupts: Interrupts | None = None,
@@ -260,6 +129,7 @@ def _open_log(spec: FlightSpec, config: Config) -> FlightRecorder:
     md = dict(spec.metadata)
     md.update(vehicle=f"rig {spec.vehicle}" if spec.vehicle == "rig" else "mavlink",
               time_base="vehicle time since boot (lockstep)" if spec.lockstep
+              else "vehicle time since boot (its telemetry time stamps)" if spec.paced
               else "UTC (the loop's monotonic clock plus a fixed offset)")
     rec.header(run_metadata(config, [spec.controller], source="flight", **md),
                run_attachments(config, {spec.controller: make_controller(spec.controller, config)}))
@@ -282,7 +152,15 @@ def _open_vehicle(spec: FlightSpec, config: Config, console: Callable[[str], Non
             session = RigSession(config, link, envelope_for(config),
                                  vehicle_alive=child.exit_reason if child is not None else None)
             return session, link, child
-        if spec.builtin:
+        if spec.firmware == "arducopter":
+            # It boots (EKF alignment: ~40 s of its time) at BOOT_SPEEDUP, then flies at the spec's speed-up.
+            child = ArduCopterSitl(spec.firmware_path, speedup=max(BOOT_SPEEDUP, spec.speedup or 1.0)).start()
+            link = MavlinkLink(child.url, target_system=spec.target_system, target_component=spec.target_component,
+                               signing_key=spec.signing_key)
+            link.alive_check = child.check_alive
+            console(f"[link] ArduCopter SITL {child.binary} on {child.url} (booting at speed-up {child.speedup:g}), "
+                    f"its log {child.log_path}")
+        elif spec.builtin:
             link = MavlinkLink("udpin:127.0.0.1:0", target_system=spec.target_system,
                                target_component=spec.target_component, signing_key=spec.signing_key)
             port = link.conn.port.getsockname()[1]
@@ -293,7 +171,10 @@ def _open_vehicle(spec: FlightSpec, config: Config, console: Callable[[str], Non
             link = MavlinkLink(spec.port or spec.connect, baud=spec.baud or 57600, target_system=spec.target_system,
                                target_component=spec.target_component, signing_key=spec.signing_key)
         session = MavlinkSession(config, link, output=spec.output,
-                                 vehicle_alive=child.exit_reason if child is not None else None)
+                                 vehicle_alive=child.exit_reason if child is not None else None,
+                                 speedup=(spec.speedup or 1.0) if spec.paced else None,
+                                 ready_timeout_s=spec.ready_timeout_s,
+                                 boot_speedup=child.speedup if spec.firmware is not None else None)
         return session, link, child
     except BaseException:
         if child is not None:
@@ -313,7 +194,7 @@ def _fly_logged(spec: FlightSpec, config: Config, recorder: FlightRecorder, cons
         why = f"{type(exc).__name__}: {exc}"
         recorder.event(0, "failsafe", f"internal error: {why}", traceback=traceback.format_exc())
         return FlightResult.refused(spec.controller, config.source, "internal_error", why)
-    clock = None if spec.lockstep else MonotonicClock()
+    clock = None if spec.lockstep or spec.paced else MonotonicClock()
     if clock is not None:
         recorder.offset_ns = utc_offset_ns(clock.now_ns())
     flight = None

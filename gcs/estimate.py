@@ -13,12 +13,36 @@ the last command (thrust along the tilted body axis, minus gravity)::
 whenever a reading arrives, so telemetry slower than the loop (or a late
 frame) is handled.  Altitude is never estimated below the ground (z >= 0).
 Attitude and Euler-angle rates are taken from the latest IMU reading.
+
+The acceleration eq. 1 misses can be estimated by a :class:`DisturbanceObserver` attached to
+the estimator: the vehicle's linear drag ``-c v`` (known: ``c`` = the config's
+``vehicle.drag_n_per_m_s`` / mass) plus a steady remainder ``d`` (a hover throttle that is not
+the vehicle's, a trim, a steady wind).  Each correction moves the velocity by ``dv``; summed
+over a second the corrections are the acceleration the prediction missed, so the observer
+integrates them, and the prediction adds the estimate::
+
+    d <- clip(d + dv / tau_d, -d_max, d_max)       on every velocity correction dv
+    predict with a = eq. 1 + (d - c v)
+
+which converges as ``dd/dt = (d_true - d) / tau_d`` and leaves the filters unbiased once it
+has.  ``tau_d`` (seconds) keeps it slow next to the controllers.  It learns only while airborne
+(thrust above half of the hover thrust and the altitude estimate ``min_height_m`` above the
+lowest seen): on the ground the ground's reaction is not a disturbance.
+
+The same observer removes a slow offset ``b`` between the velocity readings and the
+derivative of the position readings (an autopilot's EKF reports both; ArduCopter's differ by
+1-2 cm/s for a whole flight, which a law with a weak position gain such as NLSOC's turns
+into half a metre of drift).  With ``H(s) = 1 / (tau_b s + 1)`` low-passing both readings::
+
+    b = H v_read - d/dt (H p_read) = H v_read - (p_read - H p_read) / tau_b = H (v_read - dp/dt)
+
+and the velocity readings are fused as ``v_read - b``: their slow part then follows the
+positions, their fast part stays.  Without an observer nothing changes.
 """
 
 from __future__ import annotations
 
-import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import scipy.linalg
@@ -27,7 +51,7 @@ from quadrotor.state import Command, State
 from quadrotor.dynamics import eq1_acceleration
 from gcs.model import ModelParams
 
-__all__ = ["kalman_gain_cv", "AxisFilter", "StateEstimator"]
+__all__ = ["kalman_gain_cv", "AxisFilter", "DisturbanceObserver", "StateEstimator"]
 
 
 def kalman_gain_cv(ts: float, accel_noise_std: float, meas_std: float) -> tuple[float, float]:
@@ -89,11 +113,99 @@ class AxisFilter:
         self.pvv = (1 - kv) * pvv
 
 
-def model_acceleration(model: ModelParams, command: Command | None, roll: float, pitch: float) -> tuple[float, float, float]:
+def model_acceleration(model: ModelParams, command: Command | None, roll: float,
+                       pitch: float) -> tuple[float, float, float]:
     """Acceleration [m/s^2] (paper frame) of the reduced model (eq. 1) under ``command`` (zero for None)."""
     if command is None:
         return (0.0, 0.0, 0.0)
     return eq1_acceleration(command[0] / model.mass_kg, roll, pitch, model.gravity_m_s2)
+
+
+class DisturbanceObserver:
+    """The acceleration eq. 1 misses [m/s^2] (paper frame, z up): linear drag plus a steady remainder
+    estimated from a :class:`StateEstimator`'s velocity corrections (see the module docstring).
+
+    Parameters
+    ----------
+    time_constant_s : float
+        ``tau_d``: how slowly the estimate follows the mismatch (seconds, > 0).
+    drag_1_s : float
+        ``c``: linear drag per unit mass [1/s] (drag force per speed / mass), modelled, not estimated.
+    max_m_s2 : float
+        The estimated remainder is clipped to +-this per axis.
+    min_height_m : float
+        Learns only this far above the lowest altitude estimate seen (off the ground).
+    min_thrust_fraction : float
+        ... and only while the thrust commanded is at least this share of the hover thrust.
+    velocity_bias_time_constant_s : float
+        ``tau_b``: the low-pass of the velocity-reading offset (seconds, > 0).
+    max_velocity_bias_m_s : float
+        The offset is clipped to +-this per axis.
+    """
+
+    def __init__(self, time_constant_s: float, *, drag_1_s: float = 0.0, max_m_s2: float = 3.0,
+                 min_height_m: float = 0.3, min_thrust_fraction: float = 0.5,
+                 velocity_bias_time_constant_s: float = 10.0, max_velocity_bias_m_s: float = 0.5) -> None:
+        if not time_constant_s > 0 or not max_m_s2 > 0 or not drag_1_s >= 0 or not velocity_bias_time_constant_s > 0:
+            raise ValueError("time_constant_s, max_m_s2 and velocity_bias_time_constant_s must be > 0, drag_1_s >= 0")
+        self.time_constant_s = time_constant_s
+        self.drag_1_s = drag_1_s
+        self.max_m_s2 = max_m_s2
+        self.min_height_m = min_height_m
+        self.min_thrust_fraction = min_thrust_fraction
+        self.velocity_bias_time_constant_s = velocity_bias_time_constant_s
+        self.max_velocity_bias_m_s = max_velocity_bias_m_s
+        self.value = [0.0, 0.0, 0.0]
+        self.velocity_bias = [0.0, 0.0, 0.0]
+        self.learning = False
+        self.ground_z_m: float | None = None
+        self._read: list[list[float | None]] = [[None, None] for _ in range(3)]  # latest (position, velocity)
+        self._low: list[list[float] | None] = [None, None, None]                 # H p_read, H v_read
+
+    def position_reading(self, axis: int, z: float) -> None:
+        """A position reading [m] of ``axis`` (for the velocity-reading offset)."""
+        self._read[axis][0] = z
+
+    def velocity_reading(self, axis: int, z: float) -> float:
+        """A velocity reading [m/s] of ``axis``: the reading less its estimated offset ``b``."""
+        self._read[axis][1] = z
+        return z - self.velocity_bias[axis]
+
+    def advance(self, dt_s: float) -> None:
+        """Run the low-passes of the readings (held since they came) over ``dt_s`` [s]; update ``b``."""
+        tau, lim = self.velocity_bias_time_constant_s, self.max_velocity_bias_m_s
+        a = min(1.0, dt_s / tau)
+        for i, (p, v) in enumerate(self._read):
+            if p is None or v is None:
+                continue
+            low = self._low[i]
+            if low is None:
+                self._low[i] = [p, v]
+                continue
+            low[0] += a * (p - low[0])
+            low[1] += a * (v - low[1])
+            b = low[1] - (p - low[0]) / tau
+            self.velocity_bias[i] = lim if b > lim else -lim if b < -lim else b
+
+    def gate(self, z_m: float, thrust_n: float, hover_thrust_n: float) -> None:
+        """Learn from the next corrections only while airborne (altitude and thrust)."""
+        g = self.ground_z_m
+        if g is None or z_m < g:
+            self.ground_z_m = g = z_m
+        self.learning = z_m - g >= self.min_height_m and thrust_n >= self.min_thrust_fraction * hover_thrust_n
+
+    def absorb(self, axis: int, dv_m_s: float) -> None:
+        """A velocity correction ``dv_m_s`` of ``axis`` (0 x, 1 y, 2 z)."""
+        if self.learning:
+            lim = self.max_m_s2
+            v = self.value[axis] + dv_m_s / self.time_constant_s
+            self.value[axis] = lim if v > lim else -lim if v < -lim else v
+
+    def acceleration(self, velocity_m_s) -> tuple[float, float, float]:
+        """The acceleration eq. 1 misses at ``velocity_m_s`` (x, y, z) [m/s^2]: ``d - c v``."""
+        c = self.drag_1_s
+        x, y, z = self.value
+        return (x - c * velocity_m_s[0], y - c * velocity_m_s[1], z - c * velocity_m_s[2])
 
 
 class StateEstimator:
@@ -117,6 +229,11 @@ class StateEstimator:
     ground_z_m : float or None
         Altitude of the ground (the estimate never goes below it); None = no ground
         constraint (a real vehicle's local origin need not be on the ground).
+
+    Attributes
+    ----------
+    disturbance : DisturbanceObserver or None
+        Attach one to estimate a steady disturbance (None: none, the filters as they were).
     """
 
     def __init__(self, ts: float, model: ModelParams, position_std_m: Sequence[float], accel_noise_std_m_s2: float,
@@ -126,6 +243,7 @@ class StateEstimator:
         self.model = model
         self.position_var = [max(float(s), 1e-4) ** 2 for s in position_std_m]
         self.accel_noise_std_m_s2 = accel_noise_std_m_s2
+        self.disturbance: DisturbanceObserver | None = None
         self.reset()
 
     def reset(self) -> None:
@@ -138,6 +256,11 @@ class StateEstimator:
         if self.axes is None:
             return
         acc = model_acceleration(self.model, last_command, self.attitude[0], self.attitude[1])
+        obs = self.disturbance
+        if obs is not None:
+            obs.advance(dt)
+            obs.gate(self.axes[2].p, last_command[0] if last_command is not None else 0.0, self.model.hover_thrust_n)
+            acc = tuple(a + d for a, d in zip(acc, obs.acceleration([f.v for f in self.axes])))
         for f, a in zip(self.axes, acc):
             f.predict(dt, a)
         self._clamp_ground()
@@ -149,19 +272,29 @@ class StateEstimator:
             self.axes = [AxisFilter(self.accel_noise_std_m_s2, p, 0.0, v, 1.0) for p, v in zip(pos, var)]
             self._clamp_ground()
             return
-        for f, z, v in zip(self.axes, pos, var):
+        obs = self.disturbance
+        for i, (f, z, v) in enumerate(zip(self.axes, pos, var)):
+            v0 = f.v
             f.correct_position(z, v)
+            if obs is not None:
+                obs.position_reading(i, z)
+                obs.absorb(i, f.v - v0)
         self._clamp_ground()
 
     def correct_velocity(self, vel: Sequence[float], var: Sequence[float]) -> None:
         """Fuse a velocity reading (paper frame) [m/s]."""
         if self.axes is None:
             return
-        for f, z, v in zip(self.axes, vel, var):
-            f.correct_velocity(z, v)
+        obs = self.disturbance
+        for i, (f, z, v) in enumerate(zip(self.axes, vel, var)):
+            v0 = f.v
+            f.correct_velocity(z if obs is None else obs.velocity_reading(i, z), v)
+            if obs is not None:
+                obs.absorb(i, f.v - v0)
         self._clamp_ground()
 
-    def set_attitude(self, roll: float, pitch: float, yaw: float, roll_rate: float, pitch_rate: float, yaw_rate: float) -> None:
+    def set_attitude(self, roll: float, pitch: float, yaw: float,
+                     roll_rate: float, pitch_rate: float, yaw_rate: float) -> None:
         """Latest attitude [rad] and Euler-angle rates [rad/s]."""
         self.attitude = (roll, pitch, yaw, roll_rate, pitch_rate, yaw_rate)
 
@@ -174,6 +307,13 @@ class StateEstimator:
             fz.p = g
             if fz.v < 0.0:
                 fz.v = 0.0
+
+    def disturbance_m_s2(self) -> tuple[float, float, float]:
+        """The acceleration eq. 1 misses (x, y, z up) [m/s^2] at the estimated velocity; zeros without an
+        observer (or before the first reading)."""
+        if self.disturbance is None or self.axes is None:
+            return (0.0, 0.0, 0.0)
+        return self.disturbance.acceleration([f.v for f in self.axes])
 
     @property
     def initialised(self) -> bool:

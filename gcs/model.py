@@ -18,6 +18,11 @@ The eq. 16 / eq. 20 models are ``x(k+1) = f0(x, ctx) + f1(x, ctx) u`` (eq. 9), i
 (lists) because the NLSOC law evaluates them at every control step; ``ctx`` is an
 :class:`AffineContext` (the attitude and the thrust applied this step).
 
+A steady disturbance acceleration ``d`` (estimated, :class:`gcs.estimate.DisturbanceObserver`)
+enters these models as gravity does: ``g - d_z`` where eq. 16 has g, ``+ Ts d`` in the velocity
+rows of eq. 20 (``AffineContext.accel_*``), and the attitude at which eq. 1 balances it
+(:func:`disturbance_tilt`) is the lateral subsystems' zero, as hover is the thrust's.
+
 Subsystems (the paper's splits), as index tuples into :class:`State`:
 
 * ``z``      [z, vz]                 (LOC, exact linearisation eq. 3)
@@ -43,7 +48,8 @@ __all__ = [
     "State", "Command", "ModelParams", "SUBSYSTEMS",
     "continuous_dynamics", "euler_step", "subsystem_state",
     "linear_z", "linear_psi", "linear_y_phi", "linear_x_theta", "MIN_TILT_COS", "tilt_cos",
-    "AffineContext", "ZPsiModel", "YPhiModel", "XThetaModel", "z_psi_affine_model",
+    "AffineContext", "ZPsiModel", "YPhiModel", "XThetaModel", "z_psi_affine_model", "disturbance_tilt",
+    "MAX_DISTURBANCE_TILT_SIN",
 ]
 
 #: Smallest cos(theta) cos(phi) used when dividing by it (|tilt| about 78 deg).
@@ -54,6 +60,31 @@ def tilt_cos(roll: float, pitch: float) -> float:
     """cos(pitch) cos(roll), floored at :data:`MIN_TILT_COS` (for thrust compensation)."""
     cc = math.cos(pitch) * math.cos(roll)
     return cc if cc > MIN_TILT_COS else MIN_TILT_COS
+
+
+#: The largest sine of the tilt that :func:`disturbance_tilt` gives (30 deg).
+MAX_DISTURBANCE_TILT_SIN = 0.5
+
+
+def disturbance_tilt(thrust_n: float, mass_kg: float, gravity_m_s2: float, accel_x_m_s2: float,
+                     accel_y_m_s2: float) -> tuple[float, float]:
+    """Roll and pitch [rad] at which eq. 1's thrust cancels a horizontal disturbance acceleration.
+
+    With ``m x'' = -u sin(theta) + m d_x`` and ``m y'' = u cos(theta) sin(phi) + m d_y``::
+
+        sin(theta_d) = m d_x / u,   sin(phi_d) = -m d_y / (u cos(theta_d))
+
+    ``u`` is floored at half the hover thrust and the sines are clipped to
+    +-:data:`MAX_DISTURBANCE_TILT_SIN`.  Zero disturbance: exactly (0, 0).
+    """
+    if accel_x_m_s2 == 0.0 and accel_y_m_s2 == 0.0:
+        return 0.0, 0.0
+    u = max(thrust_n, 0.5 * mass_kg * gravity_m_s2)
+    lim = MAX_DISTURBANCE_TILT_SIN
+    st = mass_kg * accel_x_m_s2 / u
+    pitch = math.asin(lim if st > lim else -lim if st < -lim else st)
+    sr = -mass_kg * accel_y_m_s2 / (u * math.cos(pitch))
+    return math.asin(lim if sr > lim else -lim if sr < -lim else sr), pitch
 
 
 #: Index tuples of the paper's subsystems into :class:`State`.
@@ -179,6 +210,9 @@ class AffineContext:
         Of the attitude estimate [rad] (not floored).
     thrust_n : float
         The thrust applied this step [N] (eq. 20's ``u_z*``; set after the z-psi law).
+    accel_x, accel_y, accel_z : float
+        A disturbance acceleration the models add where eq. 1 has gravity [m/s^2] (z up;
+        eq. 16 uses ``accel_z`` only where it keeps ``-g Ts`` in f0).
     """
 
     cos_roll: float = 1.0
@@ -186,6 +220,9 @@ class AffineContext:
     cos_pitch: float = 1.0
     sin_pitch: float = 0.0
     thrust_n: float = 0.0
+    accel_x: float = 0.0
+    accel_y: float = 0.0
+    accel_z: float = 0.0
 
     def set_attitude(self, roll: float, pitch: float) -> None:
         """Cosines and sines of ``roll`` and ``pitch`` [rad]."""
@@ -209,7 +246,8 @@ class ZPsiModel:
         f1    = [[0, 0], [Ts cos(theta) cos(phi) / m, 0], [0, 0], [0, Ts]]
 
     With ``gravity_in_f0=False`` the ``-g Ts`` term is dropped: the input is then the thrust
-    beyond what holds the vehicle up (erratum 8).
+    beyond what holds the vehicle up (erratum 8).  A disturbance ``ctx.accel_z`` enters as gravity
+    does: ``-(g - d_z) Ts`` in f0, or (without the term) in the hover thrust the law adds.
 
     Parameters
     ----------
@@ -231,7 +269,10 @@ class ZPsiModel:
     def f0(self, x: Sequence[float], ctx: AffineContext | None = None) -> list[float]:
         """Drift f0(x), 4 floats."""
         ts = self.ts_s
-        return [x[0] + ts * x[1], x[1] - self._gts, x[2] + ts * x[3], x[3]]
+        gts = self._gts
+        if ctx is not None and self.gravity_in_f0:
+            gts -= ts * ctx.accel_z
+        return [x[0] + ts * x[1], x[1] - gts, x[2] + ts * x[3], x[3]]
 
     def f1(self, x: Sequence[float] | None, ctx: AffineContext) -> list[list[float]]:
         """Input matrix f1(theta, phi), 4 rows of 2 (depends on the attitude only)."""
@@ -291,24 +332,30 @@ class _LateralModel:
 
 class YPhiModel(_LateralModel):
     """Eq. 20: ``f0 = [y + Ts vy, vy + Ts u cos(theta) sin(phi) / m, phi + Ts phi_rate, phi_rate]``,
-    u the thrust applied this step (``ctx.thrust_n``)."""
+    u the thrust applied this step (``ctx.thrust_n``); ``+ Ts d_y`` in the velocity row with a
+    disturbance (``ctx.accel_y``)."""
 
     __slots__ = ()
 
     def f0(self, x: Sequence[float], ctx: AffineContext) -> list[float]:
         """Drift f0(x, u), 4 floats."""
         ts = self.ts_s
-        return [x[0] + ts * x[1], x[1] + self._ts_m * ctx.thrust_n * ctx.cos_pitch * ctx.sin_roll,
-                x[2] + ts * x[3], x[3]]
+        v = x[1] + self._ts_m * ctx.thrust_n * ctx.cos_pitch * ctx.sin_roll
+        if ctx.accel_y:
+            v += ts * ctx.accel_y
+        return [x[0] + ts * x[1], v, x[2] + ts * x[3], x[3]]
 
 
 class XThetaModel(_LateralModel):
     """Eq. 20 for x-theta (not printed): as :class:`YPhiModel` with ``vx - Ts u sin(theta) / m``
-    (m x'' = -u sin theta, eq. 1)."""
+    (m x'' = -u sin theta, eq. 1), ``+ Ts d_x`` with a disturbance (``ctx.accel_x``)."""
 
     __slots__ = ()
 
     def f0(self, x: Sequence[float], ctx: AffineContext) -> list[float]:
         """Drift f0(x, u), 4 floats."""
         ts = self.ts_s
-        return [x[0] + ts * x[1], x[1] - self._ts_m * ctx.thrust_n * ctx.sin_pitch, x[2] + ts * x[3], x[3]]
+        v = x[1] - self._ts_m * ctx.thrust_n * ctx.sin_pitch
+        if ctx.accel_x:
+            v += ts * ctx.accel_x
+        return [x[0] + ts * x[1], v, x[2] + ts * x[3], x[3]]

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gcs.control import Controller
-from gcs.control.base import wrap_angle
+from gcs.control.base import NO_DISTURBANCE, Disturbance, wrap_angle
 from gcs.control.cost import cost_input, quadratic_cost
 from gcs.model import z_psi_affine_model
 from gcs.optimal_problem import COST_CONVENTIONS, Z_PSI, AltitudeProblem, check_convention
@@ -36,7 +36,8 @@ class OptimalAffinePolicy(Controller):
         self.problem = problem
         self.K, self.k_ff = K, k_ff
 
-    def step(self, k: int, state: State, ref: State) -> Command:
+    def step(self, k: int, state: State, ref: State, disturbance_m_s2: Disturbance = NO_DISTURBANCE) -> Command:
+        """The optimum of the problem's model, which has no disturbance (``disturbance_m_s2`` is not used)."""
         N = self.problem.horizon_steps
         if not 0 <= k < N:
             raise ValueError(f"k must be in 0 .. {N - 1}, got {k}")

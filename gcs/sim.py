@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import numbers
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any
+from collections.abc import Callable, Sequence
 
 from gcs.config import Config
 from gcs.config.bounds import MAX_RUNS, WEEK_S
@@ -123,7 +124,7 @@ def simulate(config: Config, controller: str, *, run: int = 0, seed: int | None 
     designed : Controller or None
         An already designed ``controller`` for this config to reuse (it is reset);
         None designs one.
-    log : gcs.log.FlightLog, a sink of gcs.log.sink (e.g. BackgroundSink) or None
+    log : gcs.log.writer.FlightLog, a sink of gcs.log.sink (e.g. BackgroundSink) or None
         Log every control tick of this flight (estimate, reference, error, command,
         horizon, cost, truth, phase events; see :mod:`gcs.log.simrecorder`), appended after
         what the log already holds.  None: no logging.

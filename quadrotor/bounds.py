@@ -71,7 +71,8 @@ class Bound:
             Not a number, not finite, or out of range; the message gives the allowed range.
         """
         kind = "an integer" if self.integer else "a number"
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or (self.integer and not isinstance(value, int)):
+        if (isinstance(value, bool) or not isinstance(value, (int, float))
+                or (self.integer and not isinstance(value, int))):
             raise OutOfBounds(f"must be {kind}, got {short_repr(value)}; {self.describe()}")
         unit = f" {self.unit}" if self.unit else ""
         try:

@@ -19,7 +19,8 @@ the 400 Hz and 100 Hz loops).
 from __future__ import annotations
 
 import math
-from typing import NamedTuple, Sequence
+from typing import NamedTuple
+from collections.abc import Sequence
 
 __all__ = [
     "ned_to_paper_position", "ned_to_paper_velocity", "paper_to_ned_position",
@@ -81,14 +82,16 @@ def body_rates_to_euler_rates(roll: float, pitch: float, p: float, q: float, r: 
     return (p + (q * sr + r * cr) * tp, q * cr - r * sr, (q * sr + r * cr) / cp)
 
 
-def euler_rates_to_body_rates(roll: float, pitch: float, droll: float, dpitch: float, dyaw: float) -> tuple[float, float, float]:
+def euler_rates_to_body_rates(roll: float, pitch: float, droll: float, dpitch: float,
+                              dyaw: float) -> tuple[float, float, float]:
     """ZYX Euler-angle rates [rad/s] -> FRD body rates (p, q, r) [rad/s]."""
     sr, cr = math.sin(roll), math.cos(roll)
     sp, cp = math.sin(pitch), math.cos(pitch)
     return (droll - dyaw * sp, dpitch * cr + dyaw * cp * sr, -dpitch * sr + dyaw * cp * cr)
 
 
-def euler_accel_to_body_accel(angles: Sequence[float], rates: Sequence[float], accels: Sequence[float]) -> tuple[float, float, float]:
+def euler_accel_to_body_accel(angles: Sequence[float], rates: Sequence[float],
+                              accels: Sequence[float]) -> tuple[float, float, float]:
     """Euler-angle accelerations (the paper's tau) -> FRD body angular accelerations [rad/s^2].
 
     Parameters

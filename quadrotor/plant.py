@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from collections.abc import Sequence
 
 from quadrotor.dynamics import eq1_acceleration
 from quadrotor.state import State
@@ -125,12 +125,11 @@ def step(
 
     for _ in range(n):
         grounded = z <= 0.0 and vz <= 0.0
-        if grounded:
-            # Sitting on the ground, level: does the net vertical force lift it?
-            if um - g + cwz - c * vz <= 0.0:
-                z = vx = vy = vz = 0.0
-                phi = th = p = q = r = 0.0
-                continue
+        # Sitting on the ground, level: does the net vertical force lift it?
+        if grounded and um - g + cwz - c * vz <= 0.0:
+            z = vx = vy = vz = 0.0
+            phi = th = p = q = r = 0.0
+            continue
         # Attitude at the RK4 stage times t = 0, h/2, h (exact under ZOH).
         phi_m = phi + p * h2 + 0.5 * tp * h2 * h2
         th_m = th + q * h2 + 0.5 * tt * h2 * h2

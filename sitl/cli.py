@@ -227,7 +227,7 @@ def _watch_parent(pid: int, stop) -> None:
 
 
 def _serve(server: SitlServer | RigServer, what: str, args: argparse.Namespace) -> int:
-    def on_signal(signum, frame) -> None:  # noqa: ARG001
+    def on_signal(signum, frame) -> None:
         server.request_stop()
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}

@@ -52,7 +52,7 @@ DEFAULT_ENDPOINT = ("udp", "127.0.0.1:14550", "--udp")
 class EndpointAction(argparse.Action):
     """Appends ``(kind, value, option)`` to ``namespace.endpoints``, keeping the command-line order."""
 
-    def __call__(self, parser, namespace, values, option_string=None) -> None:  # noqa: ARG002
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
         eps = list(getattr(namespace, self.dest, None) or [])
         eps.append((self.const, values, option_string))
         setattr(namespace, self.dest, eps)

@@ -194,7 +194,10 @@ def test_same_seed_same_tables(small_campaign, tmp_path):
     assert main(["campaign", "--experiment", "all", "--runs", "1", "--controllers", "loc,nlsoc",
                  "--duration", SHORT, "--workers", "2", "--seed", "3", "--out", str(out), "--no-figures", "-q",
                  "--horizons", "1"]) == 0
-    key = lambda r: (r["experiment"], r["controller"], r["run"])
+
+    def key(r):
+        return (r["experiment"], r["controller"], r["run"])
+
     first = {key(r): r for r in json.loads((small_campaign / "runs.json").read_text())}
     again = json.loads((out / "runs.json").read_text())
     assert len(again) == 3 * 2

@@ -106,7 +106,8 @@ def test_controllers_reset_and_share_the_interface(outdoor):
 
 def test_cli_json_schema():
     p = subprocess.run([sys.executable, "-m", "gcs.cli", "sim", "--config", "indoor-4dof", "--controller", "all",
-                        "--runs", "2", "--duration", "5", "--json", "--no-log"], capture_output=True, text=True, timeout=300)
+                        "--runs", "2", "--duration", "5", "--json", "--no-log"],
+                       capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr
     doc = json.loads(p.stdout)
     assert doc["experiment"] == "indoor-4dof" and doc["runs"] == 2 and doc["duration_s"] == 5.0
@@ -126,7 +127,8 @@ def test_loc_terminal_policy_is_the_one_step_gain(outdoor):
     far = ctl.step(500, State(z=1.0), State(z=2.0))
     near = ctl.step(501, State(z=1.9), State(z=2.0))
     assert far.thrust_n == pytest.approx(near.thrust_n) == pytest.approx(9.81)
-    restart = make_controller("loc", dataclasses.replace(outdoor, experiment=dataclasses.replace(exp, after_horizon="restart")))
+    restart = make_controller("loc", dataclasses.replace(outdoor,
+                                                         experiment=dataclasses.replace(exp, after_horizon="restart")))
     assert restart.step(100, State(z=1.0), State(z=2.0)).thrust_n > 20.0
 
 
@@ -145,6 +147,7 @@ def test_cli_rejects_short_durations_and_printed_matrices_fly():
 
 def test_cli_table():
     p = subprocess.run([sys.executable, "-m", "gcs.cli", "sim", "--config", "outdoor-altitude", "--controller", "pd",
-                        "--runs", "1", "--duration", "3", "-q", "--no-log"], capture_output=True, text=True, timeout=300)
+                        "--runs", "1", "--duration", "3", "-q", "--no-log"],
+                       capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr
     assert "outdoor-altitude: 1 run(s) x 3 s" in p.stdout and "J_e = sum||e||" in p.stdout

@@ -112,7 +112,8 @@ def test_printed_q_rejected_unless_printed_mode_is_asked_for(raw):
     ok = mutate(raw, ("experiment", "matrices"), "printed")
     assert parse_config(ok, "ok.toml").experiment.matrices == "printed"
     # ... but every matrix without a printed variant is still checked.
-    bad = mutate(ok, ("nlsoc", "z_psi", "H"), [[-4200.0, 3800.0, 0, 0], [3800.0, 4300.0, 0, 0], [0, 0, 17500.0, 16000.0], [0, 0, 16000.0, 17500.0]])
+    bad = mutate(ok, ("nlsoc", "z_psi", "H"), [[-4200.0, 3800.0, 0, 0], [3800.0, 4300.0, 0, 0],
+                                               [0, 0, 17500.0, 16000.0], [0, 0, 16000.0, 17500.0]])
     reject(bad, "nlsoc.z_psi.H", "indefinite")
 
 
@@ -148,7 +149,8 @@ def test_mission_phase_errors(raw):
     phases = copy.deepcopy(raw["mission"]["phases"])
     phases[0]["kind"] = "loop"
     reject(mutate(raw, ("mission", "phases"), phases), "mission.phases[0].kind", "must be one of")
-    reject(mutate(raw, ("mission", "phases"), [{"kind": "hold", "duration_s": 1.0}]), "mission.phases[0].kind", "needs a takeoff")
+    reject(mutate(raw, ("mission", "phases"), [{"kind": "hold", "duration_s": 1.0}]),
+           "mission.phases[0].kind", "needs a takeoff")
     reject(mutate(raw, ("mission", "phases"), [{"kind": "takeoff", "duration_s": -1.0, "z_m": 1.0}]),
            "mission.phases[0].duration_s", "must be > 0")
 
@@ -164,7 +166,8 @@ def test_load_config_errors(tmp_path):
 
 @settings(max_examples=40, deadline=None)
 @given(st.dictionaries(st.sampled_from(["experiment", "vehicle", "mission", "loc", "nlsoc", "pd", "sim", "x"]),
-                       st.one_of(st.integers(), st.text(max_size=3), st.dictionaries(st.text(max_size=3), st.integers(), max_size=2)),
+                       st.one_of(st.integers(), st.text(max_size=3),
+                                 st.dictionaries(st.text(max_size=3), st.integers(), max_size=2)),
                        max_size=8))
 def test_garbage_documents_raise_config_errors_only(doc):
     with pytest.raises(ConfigError):

@@ -23,7 +23,6 @@ from quadrotor.errors import ConfigError
 from gcs.metrics import controller_cost, flight_metrics
 from gcs.mission import Mission
 from gcs.sim import SimError, SimOptions, check_run, run_experiment, simulate
-from quadrotor.errors import ConfigError
 from sitl.copter.vehicle_file import VEHICLE_BOUNDS, load_vehicle, parse_vehicle
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -34,10 +33,10 @@ BAD = (math.nan, math.inf, -math.inf, 1e300, -1e300, 1e-300)
 
 # Keys the bundled configs leave out, with a valid value to put there (the bad one replaces it).
 ABSENT = {
-    "sim.wind.direction_deg": 90.0, "sim.wind.vertical_m_s": 0.0,
+    "sim.wind.direction_deg": 90.0, "sim.wind.vertical_m_s": 0.0, "estimator.disturbance_time_constant_s": 2.0,
     **{f"flight.{k}": v for k, v in {
         "telemetry_rate_hz": 100.0, "telemetry_stale_s": 0.3, "max_tilt_deg": 35.0, "fence_half_width_m": 20.0,
-        "ceiling_m": 10.0, "rate_gain_1_s": [25.0, 25.0, 10.0], "inertia_kg_m2": [0.01, 0.01, 0.018],
+        "ceiling_m": 10.0, "rate_gain_1_s": [65.0, 65.0, 80.0], "inertia_kg_m2": [0.01, 0.01, 0.018],
         "max_torque_nm": [1.9, 1.9, 0.2], "position_std_m": 0.05, "velocity_std_m_s": 0.05,
         "landing_speed_m_s": 0.5, "min_battery_v": 10.5, "land_timeout_s": 30.0}.items()},
 }

@@ -247,10 +247,10 @@ def test_an_exception_in_the_controller_lands_and_restores():
     def hook(flight):
         step = flight.controller.step
 
-        def failing(k, state, ref):
+        def failing(k, state, ref, **kw):
             if k == 250:
                 raise ZeroDivisionError("injected")
-            return step(k, state, ref)
+            return step(k, state, ref, **kw)
         flight.controller.step = failing
 
     result, snap, uplink, params = fly_through(flight_hook=hook)
@@ -265,8 +265,8 @@ def test_a_non_finite_controller_output_is_never_sent():
     def hook(flight):
         step = flight.controller.step
 
-        def nan_after(k, state, ref):
-            cmd = step(k, state, ref)
+        def nan_after(k, state, ref, **kw):
+            cmd = step(k, state, ref, **kw)
             return cmd._replace(thrust_n=math.nan) if k >= 250 else cmd
         flight.controller.step = nan_after
 
@@ -287,8 +287,8 @@ def test_the_output_guard_replaces_a_bad_setpoint_and_fails_safe():
         def preflight():
             orig_preflight()
             fields = flight.session.adapter.fields
-            flight.session.adapter.fields = lambda state, cmd: bad_fields(state, cmd) if flight.stats.ticks >= 250 else \
-                fields(state, cmd)
+            flight.session.adapter.fields = (lambda state, cmd: bad_fields(state, cmd) if flight.stats.ticks >= 250
+                                             else fields(state, cmd))
         flight.preflight = preflight
 
     result, snap, uplink, params = fly_through(flight_hook=hook)
@@ -499,7 +499,8 @@ def test_the_built_in_sitl_dying_in_flight_is_noticed_at_once(tmp_path):
             if line.startswith("[phase] takeoff ("):
                 break
         children = subprocess.run(["pgrep", "-P", str(proc.pid)], capture_output=True, text=True).stdout.split()
-        sitl = [int(c) for c in children if "sitl.cli" in Path(f"/proc/{c}/cmdline").read_bytes().decode(errors="replace")]
+        sitl = [int(c) for c in children
+                if "sitl.cli" in Path(f"/proc/{c}/cmdline").read_bytes().decode(errors="replace")]
         assert sitl, children
         t_kill = time.monotonic()
         for pid in sitl:

@@ -1,4 +1,4 @@
-"""Units of the flight stack: output adapters, telemetry decoding, clocks, loop statistics."""
+"""Units of the flight stack: telemetry decoding, clocks, loop statistics (output adapters: test_output_adapters.py)."""
 
 import math
 
@@ -7,11 +7,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.estimate import StateEstimator
 from quadrotor.clock import ManualClock
-from gcs.vehicles.output import OutputAdapter, OutputModel
 from gcs.flight.stats import LoopStats
 from gcs.vehicles.telemetry import Telemetry
-from quadrotor.frames import quaternion_to_euler
-from quadrotor.state import Command, State
 from gcs.model import ModelParams
 
 MAV = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
@@ -21,58 +18,6 @@ def packed(msg):
     """The message as received: packed, so that it carries its source system and component."""
     msg.pack(MAV)
     return msg
-
-
-def model(kind, **kw):
-    args = dict(kind=kind, mass_kg=1.0, gravity_m_s2=9.81, hover_throttle=0.4, inertia_kg_m2=(0.01, 0.01, 0.02),
-                max_torque_nm=(2.0, 2.0, 0.2), rate_gain_1_s=(25.0, 25.0, 10.0), angle_gain_1_s=(4.5, 4.5, 4.5))
-    args.update(kw)
-    return OutputModel(**args)
-
-
-def test_thrust_normalisation_uses_the_hover_throttle():
-    m = model("attitude")
-    assert m.thrust_norm(9.81) == pytest.approx(0.4)
-    assert m.thrust_norm(2 * 9.81) == pytest.approx(0.8)
-    assert m.thrust_norm(100.0) == 1.0 and m.thrust_norm(-1.0) == 0.0
-
-
-def test_actuator_controls_are_torques_over_their_maximum():
-    a = OutputAdapter(model("actuator"), MAV)
-    f = a.fields(State(z=1.0), Command(9.81, 50.0, -100.0, 5.0))
-    assert f["message"] == "SET_ACTUATOR_CONTROL_TARGET"
-    assert f["controls"][:4] == pytest.approx([0.01 * 50 / 2.0, 0.01 * -100 / 2.0, 0.02 * 5 / 0.2, 0.4])
-    assert a.fields(State(), Command(9.81, 1e4, 0, 0))["controls"][0] == 1.0
-    msg = packed(a.encode(f, 1234))
-    assert msg.get_type() == "SET_ACTUATOR_CONTROL_TARGET" and msg.group_mlx == 0
-
-
-def test_rates_output_adds_the_acceleration_over_the_rate_gain():
-    a = OutputAdapter(model("rates"), MAV)
-    f = a.fields(State(roll_rate=0.1), Command(9.81, 5.0, -2.5, 1.0))
-    assert f["type_mask"] == 128
-    assert f["body_rates"] == pytest.approx([0.1 + 5.0 / 25, -2.5 / 25, 1.0 / 10])
-    assert math.fsum(c * c for c in f["q"]) == pytest.approx(1.0)
-
-
-def test_attitude_output_leads_by_one_period_and_feeds_forward():
-    a = OutputAdapter(model("attitude"), MAV)
-    s = State(roll=0.1, roll_rate=0.5)
-    cmd = Command(9.81, 20.0, 0.0, 0.0)
-    f = a.fields(s, cmd)
-    assert f["type_mask"] == 0
-    roll_t = quaternion_to_euler(f["q"])[0]
-    assert roll_t == pytest.approx(0.1 + 0.5 * 0.01 + 0.5 * 20.0 * 0.01 ** 2, abs=1e-9)
-    # The autopilot's rate demand K_a e + ff equals omega + alpha / K_r.
-    e = roll_t - 0.1
-    assert 4.5 * e + f["body_rates"][0] == pytest.approx(0.5 + 20.0 / 25.0, rel=1e-3)
-
-
-def test_output_model_is_checked():
-    with pytest.raises(ValueError, match="hover_throttle"):
-        model("attitude", hover_throttle=1.2)
-    with pytest.raises(ValueError, match="output"):
-        model("torque")
 
 
 def test_telemetry_is_converted_to_the_paper_frame():

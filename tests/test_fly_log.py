@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+from itertools import pairwise
 from pathlib import Path
 
 import pytest
@@ -20,7 +21,7 @@ from gcs.errors import LogError
 from gcs.flight.flight import Flight
 from gcs.vehicles.mavlink import MavlinkSession
 from gcs.link.mavlink import MavlinkLink
-from gcs.log import FlightLog
+from gcs.log.writer import FlightLog
 from gcs.log import topics as T
 from gcs.log.mcap.reader import read_log
 from gcs.log.recorder import FlightRecorder
@@ -166,7 +167,7 @@ def test_sigkill_mid_flight_leaves_a_readable_log_to_about_its_last_second(tmp_p
     assert log.truncated == (victims == "gcs+writer")
     ks = [d["k"] for _, d in log.decoded(T.HORIZON)]
     # (in real time a late tick is skipped, so k may jump; what was logged is in order, none twice)
-    assert ks and ks[0] == 0 and all(b > a for a, b in zip(ks, ks[1:])), "an ordered prefix of the flight"
+    assert ks and ks[0] == 0 and all(b > a for a, b in pairwise(ks)), "an ordered prefix of the flight"
     assert log.counts[T.STATE] >= len(ks)
     lag_s = (killed_ns - log.last_ns[T.STATE]) / 1e9  # real-time logs are on the UTC time line
     assert -0.05 < lag_s < 1.0, f"the last {lag_s:.2f} s before the kill are missing"

@@ -176,7 +176,8 @@ def test_an_excessive_command_trips_the_rigs_cutoff_and_the_flight_stops(rig):
     assert result.exit_reason == "vehicle_took_over"
     assert any("cut-off" in e["text"] and "CUT_COMMAND" in e["text"] for e in result.events)
     assert snap["cutoffs"] == 1
-    assert snap["state"] == RigState.DISARMED and not snap["flags"] & RigFlags.CUTOFF  # cleared once the motors were off
+    # cleared once the motors were off
+    assert snap["state"] == RigState.DISARMED and not snap["flags"] & RigFlags.CUTOFF
 
 
 def test_an_already_armed_rig_is_refused(rig):

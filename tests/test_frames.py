@@ -4,7 +4,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from quadrotor.frames import body_rates_to_euler_rates, euler_accel_to_body_accel, euler_rates_to_body_rates, euler_to_quaternion, ned_to_paper_position, ned_to_paper_velocity, paper_to_ned_position, quaternion_to_euler
+from quadrotor.frames import (body_rates_to_euler_rates, euler_accel_to_body_accel, euler_rates_to_body_rates,
+                              euler_to_quaternion, ned_to_paper_position, ned_to_paper_velocity, paper_to_ned_position,
+                              quaternion_to_euler)
 
 angle = st.floats(-1.2, 1.2)
 rate = st.floats(-3, 3)

@@ -20,7 +20,7 @@ pytestmark = pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs SI
 # "idle" writes for half a second and then stops (only the background thread flushes).
 WRITER = textwrap.dedent("""
     import sys, time
-    from gcs.log import FlightLog
+    from gcs.log.writer import FlightLog
     from quadrotor.state import Command, State
     path, mode = sys.argv[1], sys.argv[2]
     log = FlightLog(path)

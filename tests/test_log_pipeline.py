@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from gcs.errors import LogError
-from gcs.log import FlightLog
+from gcs.log.writer import FlightLog
 from gcs.log import topics as T
 from gcs.log.framing import from_wire, pack, to_wire, unpack
 from gcs.log.mcap.reader import read_log
@@ -153,6 +153,31 @@ def test_a_writer_far_behind_drops_and_counts(tmp_path):
     assert not read_log(path).truncated
     with pytest.raises(LogError, match="closed"):
         sink.put_many([Event(2, "x", "late")])
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="F_SETPIPE_SZ is Linux's")
+def test_a_starved_writer_backlog_waits_in_the_kernel_not_in_the_producer(tmp_path):
+    """A niced writer starved of CPU: what the producer handed over sits in the enlarged pipe, so a
+    SIGKILL of the producer loses none of it."""
+    import fcntl
+
+    from gcs.log.sink import PIPE_BYTES
+
+    path = tmp_path / "starved.mcap"
+    sink = BackgroundSink(path)
+    fd = sink._proc.stdin.fileno()
+    assert fcntl.fcntl(fd, fcntl.F_GETPIPE_SZ) >= min(PIPE_BYTES, int(open("/proc/sys/fs/pipe-max-size").read()))
+    os.kill(sink._proc.pid, signal.SIGSTOP)
+    try:
+        n = 0
+        while n < 300_000 // 40:  # ~300 kB of records: far more than a default 64 kB pipe
+            sink.put_many([Event(n + i, "note", "x" * 24) for i in range(100)])
+            n += 100
+        assert not sink._pipe._backlog and sink.dropped == 0
+    finally:
+        os.kill(sink._proc.pid, signal.SIGCONT)
+    stats = sink.close()
+    assert stats["dropped"] == 0 and read_log(path, None).counts[T.EVENTS] == n
 
 
 def test_the_writer_finishes_the_file_when_its_producer_is_killed(tmp_path):

@@ -6,7 +6,7 @@ import pytest
 
 from gcs.cli import main
 from gcs.errors import LogError
-from gcs.log import FlightLog
+from gcs.log.writer import FlightLog
 from gcs.log import topics as T
 from gcs.log.mcap.reader import MAGIC, read_log
 from quadrotor.state import Command, State

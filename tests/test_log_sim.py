@@ -5,6 +5,7 @@ import math
 import re
 import struct
 import sys
+from itertools import pairwise
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ from gcs.cli import main
 from gcs.config import load_config
 from gcs.control import make_controller
 from gcs.errors import LogError
-from gcs.log import FlightLog
+from gcs.log.writer import FlightLog
 from gcs.log import topics as T
 from gcs.log.mcap.reader import read_log
 from gcs.log.meta import write_run_header
@@ -72,7 +73,7 @@ def test_logged_series_are_the_flown_ones(sim_log):
         assert len(truth) == k + 1
         assert np.array_equal([[m[f] for f in T.STATE_FIELDS] for m in truth], run.record.state)
     # Flights follow each other on the time line; ticks are ts apart.
-    for a, b in zip(flights, flights[1:]):
+    for a, b in pairwise(flights):
         assert b.start_ns == a.start_ns + a.steps * ts_ns + 1_000_000_000
     times = [t for t, _ in log.decoded(T.COMMAND)][:600]
     assert np.all(np.diff(times[:int(DURATION_S * 100)]) == ts_ns)

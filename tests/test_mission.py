@@ -49,7 +49,8 @@ def test_landing_and_zero_velocity_option():
 
 
 def test_explicit_circle_centre_and_empty_mission():
-    m = Mission([PhaseConfig("takeoff", 1.0, z_m=1.0), PhaseConfig("circle", 4.0, radius_m=2.0, period_s=4.0, center_m=(0.0, 0.0))])
+    m = Mission([PhaseConfig("takeoff", 1.0, z_m=1.0),
+                 PhaseConfig("circle", 4.0, radius_m=2.0, period_s=4.0, center_m=(0.0, 0.0))])
     r = m.reference(1.0)
     assert math.hypot(r.x, r.y) == pytest.approx(2.0)
     with pytest.raises(ValueError):

@@ -78,7 +78,7 @@ def test_affine_lqr_equals_the_stacked_least_squares_optimum(seed, N, n, m):
     K, kff, P, p, s = affine_lqr(A, B, c, Q, R, H, N)
     J_bf, U_bf = brute_force(A, B, c, Q, R, H, N, x0)
     J = affine_lqr_cost(P, p, s, x0)
-    assert J == pytest.approx(J_bf, rel=1e-8)
+    assert J == pytest.approx(J_bf, rel=1e-8)  # noqa: SIM300 - J is the cost, not a constant
     u0 = -K[N - 1] @ x0 - kff[N - 1]
     np.testing.assert_allclose(u0, U_bf[0], rtol=1e-8, atol=1e-8 * np.abs(U_bf).max())
     J_ro, U_ro = rollout(A, B, c, Q, R, H, K, kff, x0)

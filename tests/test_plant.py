@@ -39,7 +39,8 @@ def test_rk4_matches_a_tight_reference_integration_with_tilt_and_drag():
 
     def f(t, x):
         phi, th = x[6], x[7]
-        acc = [-u[0] * math.sin(th) / m, u[0] * math.cos(th) * math.sin(phi) / m, u[0] * math.cos(th) * math.cos(phi) / m - g]
+        acc = [-u[0] * math.sin(th) / m, u[0] * math.cos(th) * math.sin(phi) / m,
+               u[0] * math.cos(th) * math.cos(phi) / m - g]
         acc = [a + c / m * (w - v) for a, w, v in zip(acc, wind, x[3:6])]
         return list(x[3:6]) + acc + list(x[9:12]) + list(u[1:])
 
@@ -100,8 +101,10 @@ def test_never_below_ground_nor_nan(commands):
 
 
 def test_wind_is_seeded_and_has_its_statistics():
-    w1 = Wind(WindParams(mean_speed_m_s=2.0, direction_deg=90.0, gust_std_m_s=0.5, gust_tau_s=1.0), np.random.default_rng(3))
-    w2 = Wind(WindParams(mean_speed_m_s=2.0, direction_deg=90.0, gust_std_m_s=0.5, gust_tau_s=1.0), np.random.default_rng(3))
+    w1 = Wind(WindParams(mean_speed_m_s=2.0, direction_deg=90.0, gust_std_m_s=0.5, gust_tau_s=1.0),
+              np.random.default_rng(3))
+    w2 = Wind(WindParams(mean_speed_m_s=2.0, direction_deg=90.0, gust_std_m_s=0.5, gust_tau_s=1.0),
+              np.random.default_rng(3))
     a = np.array([w1.sample(0.01) for _ in range(20000)])
     b = np.array([w2.sample(0.01) for _ in range(20000)])
     np.testing.assert_array_equal(a, b)

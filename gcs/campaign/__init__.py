@@ -22,7 +22,15 @@ Modules, one job each:
 """
 
 from gcs.campaign.errors import CampaignError
-from gcs.campaign.plan import EXPERIMENTS, CampaignOptions, DisturbanceModel, Job, Plan, draw_disturbances, plan_campaign
+from gcs.campaign.plan import (
+           EXPERIMENTS,
+           CampaignOptions,
+           DisturbanceModel,
+           Job,
+           Plan,
+           draw_disturbances,
+           plan_campaign,
+)
 
 __all__ = ["CampaignError", "EXPERIMENTS", "CampaignOptions", "DisturbanceModel", "Job", "Plan",
            "draw_disturbances", "plan_campaign"]

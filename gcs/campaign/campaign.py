@@ -24,12 +24,17 @@ import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 from gcs.campaign.errors import CampaignError
 from gcs.campaign.executors import Executor
+from gcs.campaign.figures import draw_figures
+from gcs.campaign.optimality import DEFAULT_HORIZONS_S, format_optimality_markdown, optimality_rows
 from gcs.campaign.plan import EXPERIMENTS, CampaignOptions, Plan, plan_campaign, resolve_experiments
+from gcs.campaign.report import results_markdown
 from gcs.campaign.runner import RunResult
+from gcs.campaign.tables import aggregate, format_tables_markdown, paper_tables
+from gcs.campaign.trends import trend_checks
 
 __all__ = ["CampaignResult", "run_campaign", "execute", "write_outputs", "write_optimality", "utc_stamp",
            "copy_results", "command_line"]
@@ -37,7 +42,7 @@ __all__ = ["CampaignResult", "run_campaign", "execute", "write_outputs", "write_
 
 def utc_stamp() -> str:
     """``20261201T081129Z``: the default output folder's name."""
-    return _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    return _dt.datetime.now(_dt.UTC).strftime("%Y%m%dT%H%M%SZ")
 
 
 @dataclass(frozen=True)
@@ -106,7 +111,6 @@ def _json(obj) -> str:
 def write_optimality(out: Path, experiments: Sequence[str], horizons_s: Sequence[float],
                      controllers: Sequence[str]) -> tuple[list[dict], dict]:
     """``optimality.json`` and ``optimality.md`` for the experiments that have one; returns (rows, files)."""
-    from gcs.campaign.optimality import format_optimality_markdown, optimality_rows
 
     configs = [EXPERIMENTS[e].config for e in experiments if EXPERIMENTS[e].optimality]
     if not configs:
@@ -121,10 +125,6 @@ def write_optimality(out: Path, experiments: Sequence[str], horizons_s: Sequence
 def write_outputs(out: Path, plan: Plan, results: Sequence[RunResult], campaign_doc: dict, *,
                   figures: bool = True, horizons_s: Sequence[float] | None = None, workers: int = 1) -> dict:
     """Tables, trends, optimality, figures and RESULTS.md from the results; returns name -> path."""
-    from gcs.campaign.optimality import DEFAULT_HORIZONS_S
-    from gcs.campaign.report import results_markdown
-    from gcs.campaign.tables import aggregate, format_tables_markdown, paper_tables
-    from gcs.campaign.trends import trend_checks
 
     o = plan.options
     exps = [e.name for e in plan.experiments]
@@ -133,7 +133,8 @@ def write_outputs(out: Path, plan: Plan, results: Sequence[RunResult], campaign_
     checks = trend_checks(agg, exps)
     files = {
         "runs.json": _write(out / "runs.json", _json([r.to_json() for r in results])),
-        "tables.json": _write(out / "tables.json", _json({"seed": o.seed, "runs": o.runs, "durations_s": plan.durations_s,
+        "tables.json": _write(out / "tables.json", _json({"seed": o.seed, "runs": o.runs,
+                                                          "durations_s": plan.durations_s,
                                                           "aggregate": agg, "tables": tables})),
         "tables.md": _write(out / "tables.md", "# Tables 1–5 (gcs campaign)\n\n" +
                             format_tables_markdown(tables, o.controllers, agg)),
@@ -144,7 +145,6 @@ def write_outputs(out: Path, plan: Plan, results: Sequence[RunResult], campaign_
     files.update(opt_files)
     fig = {"files": [], "skipped": "not asked for (--no-figures)", "problems": []}
     if figures:
-        from gcs.campaign.figures import draw_figures
 
         fig = draw_figures(results, out, workers=workers)
     files["figures"] = fig["files"]
@@ -191,7 +191,7 @@ def run_campaign(options: CampaignOptions, executor_factory: Callable[[], Execut
         raise CampaignError(str(out), "", f"cannot create the output folder: {exc.strerror or exc}") from None
     if on_plan is not None:
         on_plan(plan)
-    doc = {"command": command or "gcs campaign", "started_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(),
+    doc = {"command": command or "gcs campaign", "started_utc": _dt.datetime.now(_dt.UTC).isoformat(),
            "plan": plan.to_json()}
     _write(out / "campaign.json", _json(doc))
     t0 = time.monotonic()

@@ -27,12 +27,21 @@ import subprocess
 import time
 from abc import ABC, abstractmethod
 from collections import deque
-from typing import Any, Iterator
+from typing import Any
+from collections.abc import Iterator
 
 from gcs.campaign.errors import CampaignError
 from gcs.campaign.plan import Job
-from gcs.campaign.runner import (GRACE_S, RunResult, failed_result, job_to_json, kill_tree, parse_result_line,
-                                 run_job_isolated, worker_command)
+from gcs.campaign.runner import (
+    GRACE_S,
+    RunResult,
+    failed_result,
+    job_to_json,
+    kill_tree,
+    parse_result_line,
+    run_job_isolated,
+    worker_command,
+)
 
 __all__ = ["Executor", "LocalExecutor", "DaskExecutor", "make_executor", "EXECUTORS", "DASK_HINT"]
 
@@ -52,10 +61,10 @@ class Executor(ABC):
     def as_completed(self) -> Iterator[RunResult]:
         """Yield the result of every submitted job, as each completes."""
 
-    def close(self) -> None:
+    def close(self) -> None:  # noqa: B027  optional hook, the default does nothing
         """Stop the workers (idempotent)."""
 
-    def __enter__(self) -> "Executor":
+    def __enter__(self) -> Executor:
         return self
 
     def __exit__(self, *exc: Any) -> None:
@@ -182,7 +191,8 @@ class LocalExecutor(Executor):
                 elif now >= w.deadline(self.grace_s):
                     w.kill()
                     self._pool.remove(w)
-                    yield failed_result(job, "timeout", f"killed after {job.timeout_s + self.grace_s:g} s without an answer",
+                    yield failed_result(job, "timeout",
+                                        f"killed after {job.timeout_s + self.grace_s:g} s without an answer",
                                         wall_s=now - w.started)
 
     def close(self) -> None:
@@ -232,13 +242,14 @@ class DaskExecutor(Executor):
                 self.client = distributed.Client(scheduler, timeout=30)
         except (OSError, TimeoutError, ValueError) as exc:
             self.close()
-            raise CampaignError("--scheduler", "", f"cannot reach the Dask scheduler {scheduler or '(local)'}: {exc}") from None
+            raise CampaignError("--scheduler", "",
+                                f"cannot reach the Dask scheduler {scheduler or '(local)'}: {exc}") from None
         self._futures: list[Any] = []
         self._jobs: dict[str, Job] = {}
 
     def submit(self, job: Job) -> None:
-        fut = self.client.submit(run_job_isolated, job, key=f"gcs-campaign-{job.key}-{os.getpid()}-{len(self._futures)}",
-                                 pure=False)
+        fut = self.client.submit(run_job_isolated, job,
+                                 key=f"gcs-campaign-{job.key}-{os.getpid()}-{len(self._futures)}", pure=False)
         self._jobs[fut.key] = job
         self._futures.append(fut)
 

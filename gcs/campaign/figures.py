@@ -22,11 +22,15 @@ figures are skipped and :func:`draw_figures` says why.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 import numpy as np
 
 from gcs.errors import LogError
+from gcs.log.mcap.reader import read_log
+from gcs.log.review.flights import METRIC_TOPICS, flight_arrays, split_flights
+from gcs.log.review.plot import plot_log
 
 __all__ = ["draw_figures", "representative_runs", "overlay_figures", "OVERLAYS"]
 
@@ -43,8 +47,6 @@ def representative_runs(results: Sequence[Any]) -> dict[tuple[str, str], Any]:
 
 
 def _arrays(path: str) -> dict:
-    from gcs.log.review.flights import METRIC_TOPICS, flight_arrays, split_flights
-    from gcs.log.mcap.reader import read_log
 
     log = read_log(path, METRIC_TOPICS)
     flights = split_flights(log)
@@ -111,7 +113,7 @@ def overlay_figures(experiment: str, arrays: dict[str, dict], out_dir: Path) -> 
             ("overlay_attitude", (6, 7, 8), ("roll", "pitch", "yaw"), 180.0 / np.pi, "deg"),
             ("overlay_velocity", (3, 4, 5), ("vx (north)", "vy (east)", "vz (up)"), 1.0, "m/s")):
         fig, axes = _figure(3, 1, f"{experiment}: {name.split('_')[1]} ({what}; dashed: reference)")
-        for ax, col, label in zip(np.ravel(axes), cols, labels):
+        for ax, col, label in zip(np.ravel(axes), cols, labels, strict=True):
             for ctl, a in arrays.items():
                 if a["state"].shape[0]:
                     ax.plot(a["t_state"], a["state"][:, col] * scale, lw=0.8, label=ctl)
@@ -124,7 +126,6 @@ def overlay_figures(experiment: str, arrays: dict[str, dict], out_dir: Path) -> 
 
 def _representative_figure(log_path: str, target: str, key: str) -> tuple[list[str], list[str]]:
     """One task: the six-panel figure of one run."""
-    from gcs.log.review.plot import plot_log
 
     Path(target).parent.mkdir(parents=True, exist_ok=True)
     try:

@@ -10,9 +10,11 @@ configs alone (no flight), so ``gcs campaign --optimality-only`` gives it in sec
 from __future__ import annotations
 
 from dataclasses import asdict
-from typing import Sequence
+from collections.abc import Sequence
 
+from gcs.config import load_config
 from gcs.control import CONTROLLERS
+from gcs.optimal_affine import optimality_table
 
 __all__ = ["optimality_rows", "format_optimality_markdown", "DEFAULT_HORIZONS_S"]
 
@@ -35,8 +37,6 @@ def optimality_rows(configs: Sequence[str], horizons_s: Sequence[float] = DEFAUL
     list of dict
         Fields of :class:`gcs.optimal_affine.GapRow`.
     """
-    from gcs.config import load_config
-    from gcs.optimal_affine import optimality_table
 
     rows = []
     for name in configs:
@@ -59,7 +59,8 @@ def format_optimality_markdown(rows: Sequence[dict]) -> str:
         horizons = list(dict.fromkeys(r["horizon_s"] for r in sel))
         out.append(f"#### `{exp}`: eq. 17 with {what.get(conv, conv)}")
         out.append("")
-        out.append("| horizon [s] | J_optimal | " + " | ".join(f"{c} J/J_opt" for c in ctls) + " | thrust-floor steps |")
+        out.append("| horizon [s] | J_optimal | " + " | ".join(f"{c} J/J_opt" for c in ctls)
+                   + " | thrust-floor steps |")
         out.append("|---:|---:|" + "---:|" * len(ctls) + "---|")
         for h in horizons:
             by = {r["controller"]: r for r in sel if r["horizon_s"] == h}

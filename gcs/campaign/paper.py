@@ -78,7 +78,8 @@ class PaperTable:
 
 
 def _r(printed, metric, unit, sim, exp) -> PaperRow:
-    return PaperRow(printed, metric, unit, dict(zip(PAPER_CONTROLLERS, sim)), dict(zip(PAPER_CONTROLLERS, exp)))
+    return PaperRow(printed, metric, unit, dict(zip(PAPER_CONTROLLERS, sim, strict=True)),
+                    dict(zip(PAPER_CONTROLLERS, exp)))
 
 
 PAPER_TABLES: dict[int, PaperTable] = {

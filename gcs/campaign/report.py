@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Sequence
+from collections.abc import Sequence
 
 from gcs.campaign.optimality import format_optimality_markdown
 from gcs.campaign.tables import format_tables_markdown
@@ -55,7 +55,8 @@ def reproducibility_markdown(results: Sequence) -> str:
     if late:
         lines.append(f"{len(late)} of {len(ok)} completed runs went on without the vehicle's step at least once "
                      "(lockstep telemetry timeouts: " +
-                     ", ".join(f"{r.key} {r.lockstep_timeouts}" for r in late[:12]) + (", ..." if len(late) > 12 else "")
+                     ", ".join(f"{r.key} {r.lockstep_timeouts}" for r in late[:12])
+                     + (", ..." if len(late) > 12 else "")
                      + "): their numbers depend on how busy the machine was, not only on the seed.")
     groups: dict = {}
     for r in ok:
@@ -95,7 +96,30 @@ def results_markdown(campaign: dict, tables: list[dict], agg: dict, checks: list
     results : sequence of RunResult or None
         For the reproducibility section.
     """
-    base = Path(base)
+    out = _header(campaign)
+    ctls = campaign["plan"]["controllers"]
+    out += ["## Tables 1–5", "", format_tables_markdown(tables, ctls, agg)]
+    out += ["## The paper's trends", "",
+            "Each row is computed from the numbers: on the paper's simulation column and on this campaign's "
+            "means (standard deviations for the dispersion rows). `n/a`: a value is missing.", "",
+            format_trends_markdown(checks),
+            f"Agreement: {sum(1 for c in checks if c['agree'])} of "
+            f"{sum(1 for c in checks if c['agree'] is not None)} comparable checks.", "",
+            "### Why they differ", "", EXPLANATION]
+    if optimality:
+        out += ["## Optimality gap of the altitude subproblem", "",
+                "J_controller / J_optimal of eq. 17 on the affine z–ψ model (`gcs/optimal_affine.py`): the "
+                "controllers flown from rest at z = 0 with the mission reference, unconstrained, against the exact "
+                "affine-LQ optimum, per horizon and for both NLSOC input conventions. 1 is optimal.", "",
+                format_optimality_markdown(optimality)]
+    out += _failed(agg)
+    out += ["## Reproducibility", "", reproducibility_markdown(results or ()), ""]
+    out += _figures(figures, Path(base))
+    return "\n".join(out).rstrip() + "\n"
+
+
+def _header(campaign: dict) -> list[str]:
+    """The command, what was flown and the timing."""
     plan = campaign["plan"]
     ctls = plan["controllers"]
     dm = plan["disturbance_model"]
@@ -119,43 +143,26 @@ def results_markdown(campaign: dict, tables: list[dict], agg: dict, checks: list
         out += [f"{t['runs']} flights in {t['wall_s']:.0f} s wall time on {t['workers']} worker(s) "
                 f"({t['executor']}): {t['vehicle_s']:.0f} simulated mission seconds, "
                 f"{t['throughput']:.1f} vehicle-seconds per wall second.", ""]
+    return out
 
-    out += ["## Tables 1–5", "", format_tables_markdown(tables, ctls, agg)]
 
-    out += ["## The paper's trends", "",
-            "Each row is computed from the numbers: on the paper's simulation column and on this campaign's "
-            "means (standard deviations for the dispersion rows). `n/a`: a value is missing.", "",
-            format_trends_markdown(checks),
-            f"Agreement: {sum(1 for c in checks if c['agree'])} of "
-            f"{sum(1 for c in checks if c['agree'] is not None)} comparable checks.", "",
-            "### Why they differ", "", EXPLANATION]
+def _failed(agg: dict) -> list[str]:
+    out = ["## Failed runs", ""]
+    if not agg["failed"]:
+        return out + ["None: every run completed.", ""]
+    out += ["Listed here and left out of every mean.", "",
+            "| run | status | exit code | reason | detail | output |", "|---|---|---:|---|---|---|"]
+    for f in agg["failed"]:
+        detail = (f["detail"] or "").replace("|", "\\|")
+        out.append(f"| {f['key']} | {f['status']} | {'-' if f['exit_code'] is None else f['exit_code']} | "
+                   f"{f['exit_reason'] or '-'} | {detail} | `runs/{f['key']}.out` |")
+    return out + [""]
 
-    if optimality:
-        out += ["## Optimality gap of the altitude subproblem", "",
-                "J_controller / J_optimal of eq. 17 on the affine z–ψ model (`gcs/optimal_affine.py`): the "
-                "controllers flown from rest at z = 0 with the mission reference, unconstrained, against the exact "
-                "affine-LQ optimum, per horizon and for both NLSOC input conventions. 1 is optimal.", "",
-                format_optimality_markdown(optimality)]
 
-    out += ["## Failed runs", ""]
-    if agg["failed"]:
-        out += ["Listed here and left out of every mean.", "",
-                "| run | status | exit code | reason | detail | output |", "|---|---|---:|---|---|---|"]
-        for f in agg["failed"]:
-            detail = (f["detail"] or "").replace("|", "\\|")
-            out.append(f"| {f['key']} | {f['status']} | {'-' if f['exit_code'] is None else f['exit_code']} | "
-                       f"{f['exit_reason'] or '-'} | {detail} | `runs/{f['key']}.out` |")
-        out.append("")
-    else:
-        out += ["None: every run completed.", ""]
-
-    out += ["## Reproducibility", "", reproducibility_markdown(results or ()), ""]
-
-    out += ["## Figures", ""]
+def _figures(figures: dict | None, base: Path) -> list[str]:
+    out = ["## Figures", ""]
     if figures and figures.get("files"):
         out += [f"In the campaign's output folder ({len(figures['files'])} PNG files):", ""]
         out += [f"- `{_rel(f, base)}`" for f in figures["files"]]
-        out.append("")
-    else:
-        out += [f"None ({(figures or {}).get('skipped') or 'not drawn'}).", ""]
-    return "\n".join(out).rstrip() + "\n"
+        return out + [""]
+    return out + [f"None ({(figures or {}).get('skipped') or 'not drawn'}).", ""]

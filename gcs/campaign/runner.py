@@ -31,7 +31,8 @@ import time
 import traceback
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
+from collections.abc import Callable, Iterator
 
 from gcs.api import FlightSpec
 from gcs.campaign.plan import Disturbances, Job
@@ -112,7 +113,7 @@ class RunResult:
         return asdict(self)
 
     @classmethod
-    def from_json(cls, doc: dict) -> "RunResult":
+    def from_json(cls, doc: dict) -> RunResult:
         return cls(**doc)
 
 
@@ -184,7 +185,7 @@ class _Deadline:
         self.armed = False
         self._old = None
 
-    def _fire(self, signum, frame) -> None:  # noqa: ARG002
+    def _fire(self, signum, frame) -> None:
         if self.armed:
             self.armed = False
             raise RunTimeout(f"no result after {self.seconds:g} s")
@@ -192,7 +193,7 @@ class _Deadline:
     def disarm(self) -> None:
         self.armed = False
 
-    def __enter__(self) -> "_Deadline":
+    def __enter__(self) -> _Deadline:
         if threading.current_thread() is threading.main_thread() and hasattr(signal, "setitimer"):
             self._old = signal.signal(signal.SIGALRM, self._fire)
             self.armed = True

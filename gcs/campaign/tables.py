@@ -20,7 +20,7 @@ same seed gives the same ``tables.json``, byte for byte.
 from __future__ import annotations
 
 import math
-from typing import Iterable, Sequence
+from collections.abc import Iterable, Sequence
 
 from gcs.campaign.paper import PAPER_CONTROLLERS, PAPER_TABLES
 from gcs.campaign.runner import RunResult
@@ -171,7 +171,8 @@ def format_tables_markdown(tables: list[dict], controllers: Sequence[str], agg: 
         out.append("| " + " | ".join(header) + " |")
         out.append("|" + "|".join(["---"] * 2 + ["---:"] * (len(header) - 2)) + "|")
         for row in t["rows"]:
-            label = row["label"] + (f" (paper: {row['paper_metric']}, {row['paper_unit']})" if row["paper_metric"] else "")
+            label = row["label"] + (f" (paper: {row['paper_metric']}, {row['paper_unit']})"
+                                    if row["paper_metric"] else "")
             cells = [label, row["unit"]] + [_ours(row["ours"].get(c)) for c in controllers]
             if t["kind"] == "mean":
                 ps = row["paper_sim"]

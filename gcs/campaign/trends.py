@@ -21,7 +21,7 @@ what differs between controllers — for ours only):
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 from gcs.campaign.paper import PAPER_CONTROLLERS, PAPER_TABLES
 

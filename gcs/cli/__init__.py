@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from typing import Sequence
+from collections.abc import Sequence
 
 from gcs import __version__
 from gcs.cli.args import Parser
@@ -25,7 +25,8 @@ __all__ = ["main", "build_parser"]
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = Parser(prog="gcs", description="Ground-station flight controller for quadrotors: the paper's NLSOC, LOC and PD.")
+    p = Parser(prog="gcs",
+               description="Ground-station flight controller for quadrotors: the paper's NLSOC, LOC and PD.")
     p.add_argument("--version", action="version", version=f"gcs {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     add_sim_log_arguments(add_sim_parser(sub))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
-__all__ = ["int_range", "positive_int", "nonneg_int", "positive_float", "Parser"]
+__all__ = ["int_range", "positive_int", "nonneg_int", "positive_float", "float_range", "Parser"]
 
 
 def int_range(lo: int, hi: int | None = None):
@@ -16,7 +16,8 @@ def int_range(lo: int, hi: int | None = None):
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
         if v < lo or (hi is not None and v > hi):
-            raise argparse.ArgumentTypeError(f"must be >= {lo}, got {v}" if hi is None else f"must be in {lo}..{hi}, got {v}")
+            raise argparse.ArgumentTypeError(f"must be >= {lo}, got {v}" if hi is None
+                                             else f"must be in {lo}..{hi}, got {v}")
         return v
     return parse
 
@@ -34,6 +35,19 @@ def positive_float(text: str) -> float:
     if not (v > 0 and math.isfinite(v)):
         raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
     return v
+
+
+def float_range(lo: float, hi: float):
+    """An argparse type: a finite number in ``lo..hi``."""
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not (math.isfinite(v) and lo <= v <= hi):
+            raise argparse.ArgumentTypeError(f"must be in {lo:g}..{hi:g}, got {text}")
+        return v
+    return parse
 
 
 class Parser(argparse.ArgumentParser):

@@ -17,7 +17,8 @@ def add_budget_parser(sub) -> None:
                                    "telemetry down, setpoints up, housekeeping both ways.")
     b.add_argument("--baud", type=positive_int, default=57600, help="serial baud rate, 8N1 (default 57600)")
     b.add_argument("--rate", type=positive_float, default=100.0, help="control rate [Hz] (default 100)")
-    b.add_argument("--telemetry-rate", type=positive_float, help="ATTITUDE/LOCAL_POSITION_NED rate [Hz] (default: --rate)")
+    b.add_argument("--telemetry-rate", type=positive_float,
+                   help="ATTITUDE/LOCAL_POSITION_NED rate [Hz] (default: --rate)")
     b.add_argument("--output", choices=("attitude", "rates", "actuator"), default="attitude",
                    help="setpoint message (SET_ATTITUDE_TARGET or SET_ACTUATOR_CONTROL_TARGET)")
     b.add_argument("--signed", action="store_true", help="MAVLink 2 signing (+13 bytes a frame)")

@@ -22,9 +22,17 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from gcs.campaign.campaign import command_line, copy_results, run_campaign, utc_stamp, write_optimality
 from gcs.campaign.errors import CampaignError
+from gcs.campaign.executors import _distributed, make_executor
+from gcs.campaign.plan import (
+    EXPERIMENT_CHOICES,
+    CampaignOptions,
+    DisturbanceModel,
+    parse_durations,
+    resolve_experiments,
+)
 from gcs.cli.fly import fly_overrides
-from gcs.campaign.plan import EXPERIMENT_CHOICES, CampaignOptions, DisturbanceModel, parse_durations
 from gcs.control import CONTROLLERS
 
 __all__ = ["add_campaign_parser", "cmd_campaign"]
@@ -69,7 +77,8 @@ def add_campaign_parser(sub: Any) -> None:
                    help=f"comma-separated controllers (default {','.join(CONTROLLERS)})")
     c.add_argument("--workers", type=_int, default=None, help="parallel flights (default: the CPU count)")
     c.add_argument("--out", metavar="DIR", help="output folder (default campaigns/<UTC time>/)")
-    c.add_argument("--seed", type=_int, default=1, help="campaign seed: every run's disturbances derive from it (default 1)")
+    c.add_argument("--seed", type=_int, default=1,
+                   help="campaign seed: every run's disturbances derive from it (default 1)")
     c.add_argument("--duration", action="append", default=[], metavar="[EXPERIMENT=]SECONDS",
                    help="cut the mission at this time, then land (gcs fly --duration); for every experiment, or one "
                         "with EXPERIMENT=SECONDS; repeatable (default: outdoor-altitude 120 s, the others whole)")
@@ -156,9 +165,6 @@ def cmd_campaign(args: argparse.Namespace, argv: list[str] | None = None) -> int
 
     ``argv`` is the whole ``gcs`` command line (without the program name), for the report.
     """
-    from gcs.campaign.campaign import command_line, copy_results, run_campaign, utc_stamp, write_optimality
-    from gcs.campaign.executors import make_executor
-    from gcs.campaign.plan import resolve_experiments
 
     # Absolute: the workers (a remote Dask worker too) write the runs' files there.
     out = str(Path(args.out or Path("campaigns") / utc_stamp()).absolute())
@@ -167,7 +173,7 @@ def cmd_campaign(args: argparse.Namespace, argv: list[str] | None = None) -> int
     if args.optimality_only:
         exps = [e.name for e in resolve_experiments(options.experiments)]
         Path(out).mkdir(parents=True, exist_ok=True)
-        rows, files = write_optimality(Path(out), exps, horizons, options.controllers)
+        _rows, files = write_optimality(Path(out), exps, horizons, options.controllers)
         if not files:
             raise CampaignError("--experiment", "", "none of these experiments has an optimality table "
                                 "(indoor-4dof and outdoor-altitude do)")
@@ -180,7 +186,6 @@ def cmd_campaign(args: argparse.Namespace, argv: list[str] | None = None) -> int
     if args.scheduler is not None and args.executor != "dask":
         raise CampaignError("--scheduler", "", "only with --executor dask")
     if args.executor == "dask":
-        from gcs.campaign.executors import _distributed
         _distributed()  # fail before flying anything when Dask is missing
     progress = _Progress(not args.quiet and sys.stderr.isatty())
     try:

@@ -9,13 +9,14 @@ import os
 import sys
 from pathlib import Path
 
-from gcs.api import DEFAULT_CONFIG, DEFAULT_RIG_CONFIG, FlightSpec, fly
-from gcs.cli.args import Parser, int_range, positive_float
+from gcs.api import DEFAULT_CONFIG, DEFAULT_RIG_CONFIG, FIRMWARE_SITLS, FlightSpec, fly
+from gcs.cli.args import Parser, float_range, int_range, positive_float
 from gcs.control import CONTROLLERS
 from gcs.flight.context import Interrupts
 from gcs.flight.result import EXIT_CODES, FlightResult
-from gcs.link.mavlink import read_signing_key
+from gcs.link.keys import read_signing_key
 from gcs.report import format_table
+from gcs.vehicles.arducopter_sitl import ENV_VAR as ARDUCOPTER_ENV
 from gcs.vehicles.output import OUTPUTS
 from quadrotor.errors import ConfigError
 
@@ -42,19 +43,32 @@ def add_fly_parser(sub) -> None:
                         "autopilot (with no --port: the rig emulator)")
     where = f.add_mutually_exclusive_group()
     where.add_argument("--port", metavar="DEVICE", help="serial device of the telemetry radio, e.g. /dev/ttyUSB0")
-    where.add_argument("--connect", metavar="URL", help="pymavlink URL: udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT")
+    where.add_argument("--connect", metavar="URL",
+                       help="pymavlink URL: udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT")
     f.add_argument("--baud", type=int_range(50, 20_000_000), default=None,
                    help="serial baud rate (default 57600; 115200 with --rig)")
     f.add_argument("--target-system", type=int_range(1, 255), default=1, help="vehicle system id, 1..255 (default 1)")
     f.add_argument("--target-component", type=int_range(1, 255), default=1,
                    help="vehicle component id, 1..255 (default 1)")
-    f.add_argument("--signing-key", metavar="FILE", help="MAVLink 2 signing key file (32 bytes, 64 hex digits or a passphrase)")
+    f.add_argument("--signing-key", metavar="FILE",
+                   help="MAVLink 2 signing key file (32 bytes, 64 hex digits or a passphrase)")
     f.add_argument("--output", choices=OUTPUTS, help="setpoint message (default: the config's [flight] output)")
     f.add_argument("--telemetry-rate", type=positive_float, metavar="HZ", help="ATTITUDE/LOCAL_POSITION_NED rate")
-    f.add_argument("--stale-timeout", type=positive_float, metavar="S", help="telemetry age that triggers the failsafe (default 0.3)")
+    f.add_argument("--stale-timeout", type=positive_float, metavar="S",
+                   help="telemetry age that triggers the failsafe (default 0.3)")
     f.add_argument("--force-budget", action="store_true", help="fly even when the serial link budget does not fit")
-    f.add_argument("--sitl", choices=("realtime", "lockstep"), default="realtime",
-                   help="built-in SITL timing when no port/connection is given (default realtime)")
+    f.add_argument("--sitl", choices=("realtime", "lockstep", *FIRMWARE_SITLS), default="realtime",
+                   help="the child vehicle when no port/connection is given: the built-in SITL in real time "
+                        "(default) or lockstep, or 'arducopter': ArduPilot's own ArduCopter SITL (the real firmware; "
+                        f"--arducopter PATH or ${ARDUCOPTER_ENV})")
+    f.add_argument("--arducopter", metavar="PATH", default=None,
+                   help=f"the ArduCopter SITL binary or its directory (default ${ARDUCOPTER_ENV})")
+    f.add_argument("--speedup", type=float_range(0.1, 50.0), default=None, metavar="S",
+                   help="a firmware SITL's speed-up (simulated s per wall s): started so with --sitl arducopter, or "
+                        "how a SITL at --connect was started; the flight then runs on the vehicle's clock")
+    f.add_argument("--ready-timeout", type=float_range(1.0, 3600.0), default=60.0, metavar="S",
+                   help="vehicle seconds to wait for the vehicle to become ready (EKF, telemetry) and to accept "
+                        "arming (default 60)")
     f.add_argument("--lockstep", action="store_true", help="the vehicle at --connect is a SITL in lockstep")
     f.add_argument("--seed", type=int_range(0, 2**32 - 1), default=0, help="built-in SITL seed (default 0)")
     f.add_argument("--sitl-arg", action="append", default=[], metavar="ARG",
@@ -76,11 +90,18 @@ def spec_from_args(args: argparse.Namespace, command_line: str = "") -> FlightSp
         for flag, given in (("--connect", args.connect), ("--signing-key", args.signing_key), ("--output", args.output),
                             ("--lockstep", args.lockstep or None)):
             if given is not None:
-                raise ConfigError(flag, "", "not used with --rig (the rig takes CONTROL frames on a serial port: --port)")
+                raise ConfigError(flag, "",
+                                  "not used with --rig (the rig takes CONTROL frames on a serial port: --port)")
     builtin = args.port is None and args.connect is None
+    firmware = args.sitl if args.sitl in FIRMWARE_SITLS else None
+    if firmware is not None and not builtin:
+        raise ConfigError("--sitl", args.sitl, "starts the firmware as the child vehicle: not with --port/--connect")
+    if args.arducopter is not None and firmware != "arducopter":
+        raise ConfigError("--arducopter", args.arducopter, "only with --sitl arducopter")
     return FlightSpec(
         controller=args.controller, config=args.config, vehicle="rig" if args.rig else "mavlink", port=args.port,
         connect=args.connect, baud=args.baud, lockstep=(args.sitl == "lockstep") if builtin else bool(args.lockstep),
+        firmware=firmware, firmware_path=args.arducopter, speedup=args.speedup, ready_timeout_s=args.ready_timeout,
         seed=args.seed, sitl_args=tuple(args.sitl_arg), target_system=args.target_system,
         target_component=args.target_component,
         signing_key=read_signing_key(args.signing_key) if args.signing_key else None, output=args.output,

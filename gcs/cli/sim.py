@@ -8,16 +8,16 @@ import json
 import sys
 from contextlib import nullcontext
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
+from collections.abc import Sequence
 
 from gcs.cli.args import nonneg_int, positive_float, positive_int
-from gcs.control import make_controller
+from gcs.config import MATRIX_MODES, bundled_configs, load_config
+from gcs.control import CONTROLLERS, make_controller
 from gcs.errors import LogError
 from gcs.log.meta import LOG_DIR, default_log_path, run_attachments, run_metadata
 from gcs.log.simrecorder import BYTES_PER_TICK
 from gcs.log.sink import BackgroundSink
-from gcs.config import MATRIX_MODES, bundled_configs, load_config
-from gcs.control import CONTROLLERS
 from gcs.report import format_table
 from gcs.sim import SimOptions, check_run, run_experiment
 

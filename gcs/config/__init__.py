@@ -29,12 +29,13 @@ from __future__ import annotations
 
 from gcs.config.bounds import BOUNDS, LOC_SUBSYSTEMS, MAX_HORIZON_STEPS, NLSOC_SUBSYSTEMS, bound_for
 from gcs.config.parse import bundled_configs, load_config, parse_config, resolve_config_path
-from gcs.config.sections import (AFTER_HORIZON, MATRIX_MODES, PHASE_KINDS, Config, EstimatorConfig, ExperimentConfig,
-                                 FlightConfig, Matrix, MatrixSet, PdGains, PhaseConfig, SimConfig)
+from gcs.config.sections import (AFTER_HORIZON, DISTURBANCE_MODES, MATRIX_MODES, PHASE_KINDS, Config,
+                                 EstimatorConfig, ExperimentConfig, FlightConfig, Matrix, MatrixSet, PdGains,
+                                 PhaseConfig, SimConfig)
 
 __all__ = [
     "Config", "ExperimentConfig", "MatrixSet", "PhaseConfig", "PdGains", "SimConfig",
     "EstimatorConfig", "FlightConfig", "load_config", "parse_config", "resolve_config_path", "bundled_configs",
-    "AFTER_HORIZON", "MATRIX_MODES", "PHASE_KINDS", "BOUNDS", "bound_for",
+    "AFTER_HORIZON", "MATRIX_MODES", "PHASE_KINDS", "DISTURBANCE_MODES", "BOUNDS", "bound_for",
     "LOC_SUBSYSTEMS", "NLSOC_SUBSYSTEMS", "MAX_HORIZON_STEPS", "Matrix",
 ]

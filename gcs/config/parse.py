@@ -6,12 +6,13 @@ import dataclasses
 import tomllib
 from importlib import resources
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
+from collections.abc import Mapping
 
 from gcs.config.bounds import (LOC_SUBSYSTEMS, MAX_HORIZON_STEPS, MAX_SUBSTEPS_PER_TICK, MIN_STALE_MESSAGES,
                                NLSOC_SUBSYSTEMS, PD_GAINS)
 from gcs.config.reader import Reader, matrix_group
-from gcs.config.sections import (AFTER_HORIZON, MATRIX_MODES, PHASE_KINDS, Config, EstimatorConfig,
+from gcs.config.sections import (AFTER_HORIZON, DISTURBANCE_MODES, MATRIX_MODES, PHASE_KINDS, Config, EstimatorConfig,
                                  ExperimentConfig, FlightConfig, PdGains, PhaseConfig, SimConfig)
 from quadrotor.errors import ConfigError
 from quadrotor.plant import ReducedParams
@@ -44,7 +45,8 @@ def resolve_config_path(name_or_path: str | Path) -> Path:
     candidate = resources.files("gcs.configs") / f"{stem}.toml"
     if candidate.is_file():
         return Path(str(candidate))
-    raise ConfigError(str(name_or_path), "", f"no such file, and not a bundled config (bundled: {', '.join(bundled_configs())})")
+    raise ConfigError(str(name_or_path), "",
+                      f"no such file, and not a bundled config (bundled: {', '.join(bundled_configs())})")
 
 
 def load_config(path: str | Path) -> Config:
@@ -103,7 +105,11 @@ def parse_config(raw: Mapping[str, Any], source: str = "<config>") -> Config:
     estimator = EstimatorConfig()
     if top.has("estimator"):
         est = top.sub("estimator")
-        estimator = EstimatorConfig(accel_noise_std_m_s2=est.number("accel_noise_std_m_s2", 2.0))
+        d = EstimatorConfig()
+        estimator = EstimatorConfig(
+            accel_noise_std_m_s2=est.number("accel_noise_std_m_s2", d.accel_noise_std_m_s2),
+            disturbance=est.string("disturbance", d.disturbance, choices=DISTURBANCE_MODES),
+            disturbance_time_constant_s=est.number("disturbance_time_constant_s", d.disturbance_time_constant_s))
         est.done()
     flight = _flight(top.sub("flight")) if top.has("flight") else FlightConfig()
     top_z = max(ph.z_m for ph in mission if ph.z_m is not None)

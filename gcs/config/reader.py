@@ -103,7 +103,7 @@ class Reader:
             raise self.error(name, f"must be true or false, got {short_repr(v)}")
         return v
 
-    def sub(self, name: str, default: Any = ...) -> "Reader":
+    def sub(self, name: str, default: Any = ...) -> Reader:
         """A reader of the sub-table ``name``."""
         return Reader(self.raw(name, default), self.source, self.key(name))
 
@@ -179,7 +179,8 @@ def _matrix_set(reader: Reader, n: int, m: int, mode: str, allow_same_as: tuple[
         if k not in dims:
             raise reader.error("corrected", f"unknown matrix {short_repr(k)} (expected Q, R or H)")
         if not reader.has(f"{k}_printed"):
-            raise reader.error(f"{k}_printed", f"missing: {k} is listed in 'corrected', so the printed matrix must be given")
+            raise reader.error(f"{k}_printed",
+                               f"missing: {k} is listed in 'corrected', so the printed matrix must be given")
         printed[k] = _matrix(reader, f"{k}_printed", dims[k])
     for k in dims:
         if reader.has(f"{k}_printed"):

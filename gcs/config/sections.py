@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -15,7 +16,7 @@ from quadrotor.bounds import OutOfBounds, short_repr
 from quadrotor.wind import WindParams
 
 __all__ = ["Config", "ExperimentConfig", "MatrixSet", "PhaseConfig", "PdGains", "SimConfig", "EstimatorConfig",
-           "FlightConfig", "AFTER_HORIZON", "MATRIX_MODES", "PHASE_KINDS", "Matrix"]
+           "FlightConfig", "AFTER_HORIZON", "MATRIX_MODES", "PHASE_KINDS", "DISTURBANCE_MODES", "Matrix"]
 
 AFTER_HORIZON = ("pd", "terminal", "restart")
 MATRIX_MODES = ("corrected", "printed")
@@ -119,11 +120,30 @@ class PdGains:
     note: str = ""
 
 
+#: ``[estimator] disturbance``: "auto" estimates it on a real firmware only (not in ``gcs sim``, not on
+#: the built-in SITL), "on" always where the vehicle session can, "off" never.
+DISTURBANCE_MODES = ("auto", "on", "off")
+
+
 @dataclass(frozen=True)
 class EstimatorConfig:
-    """``[estimator]``: process noise of the constant-velocity position filters."""
+    """``[estimator]``: the constant-velocity position filters and the disturbance observer.
+
+    Attributes
+    ----------
+    accel_noise_std_m_s2 : float
+        Process noise: unmodelled acceleration.
+    disturbance : {"auto", "on", "off"}
+        Estimate a steady disturbance acceleration (a wrong hover throttle, a trim) and let the
+        controllers compensate it (:class:`gcs.estimate.DisturbanceObserver`); "auto": on a real
+        firmware, off on the built-in SITL and in ``gcs sim``.
+    disturbance_time_constant_s : float
+        How slowly the estimate follows the mismatch of measured and predicted acceleration.
+    """
 
     accel_noise_std_m_s2: float = 2.0
+    disturbance: str = "auto"
+    disturbance_time_constant_s: float = 2.0
 
 
 @dataclass(frozen=True)
@@ -158,7 +178,10 @@ class FlightConfig:
     max_tilt_deg, fence_half_width_m, ceiling_m : float
         Safety envelope: tilt limit, geofence box half-width around takeoff, altitude ceiling.
     rate_gain_1_s : (3,) float
-        The autopilot's rate-loop gain (angular acceleration per rate error), roll/pitch/yaw.
+        ``K_d`` of the output adapters' body-rate demand ``omega + alpha / K_d``
+        (:mod:`gcs.vehicles.output`), roll/pitch/yaw [1/s]: the controllers' own rate damping
+        (65, 65, 80) makes the demand the rate their attitude loops settle to, which the
+        autopilot's rate loop realises whatever its own gain and delay.
     inertia_kg_m2, max_torque_nm : (3,) float
         For the actuator output: torque = I alpha, normalised by the maximum torque.
     position_std_m, velocity_std_m_s : float
@@ -177,7 +200,7 @@ class FlightConfig:
     max_tilt_deg: float = 35.0
     fence_half_width_m: float = 20.0
     ceiling_m: float = 10.0
-    rate_gain_1_s: tuple[float, float, float] = (25.0, 25.0, 10.0)
+    rate_gain_1_s: tuple[float, float, float] = (65.0, 65.0, 80.0)
     inertia_kg_m2: tuple[float, float, float] = (0.010, 0.010, 0.018)
     max_torque_nm: tuple[float, float, float] = (1.949, 1.949, 0.196)
     position_std_m: float = 0.05
@@ -203,7 +226,7 @@ class Config:
     flight: FlightConfig = field(default_factory=FlightConfig)
     raw: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
-    def with_matrices(self, mode: str) -> "Config":
+    def with_matrices(self, mode: str) -> Config:
         """A copy flying the ``corrected`` or the ``printed`` matrices (re-validated).
 
         Raises
@@ -215,7 +238,7 @@ class Config:
             raise ConfigError(self.source, "experiment.matrices", f"must be one of {MATRIX_MODES}, got {mode!r}")
         return self.with_changes("experiment", matrices=mode)
 
-    def with_changes(self, section: str, **values: Any) -> "Config":
+    def with_changes(self, section: str, **values: Any) -> Config:
         """A copy with keys of a top-level ``section`` set (re-validated; ``raw`` records them, so a
         log's ``config.json`` is the config flown).
 
@@ -226,11 +249,11 @@ class Config:
         """
         from gcs.config.parse import parse_config
 
-        raw = {k: v for k, v in self.raw.items()}
+        raw = dict(self.raw)
         raw[section] = dict(raw.get(section, {}), **values)
         return parse_config(raw, self.source)
 
-    def with_duration(self, duration_s: float) -> "Config":
+    def with_duration(self, duration_s: float) -> Config:
         """A copy whose mission ends at ``duration_s`` [s]: later phases dropped, the last one cut.
 
         A cut that would leave a phase shorter than one control period drops that phase
@@ -262,6 +285,6 @@ class Config:
             t += float(ph["duration_s"])
             if t >= duration - 1e-12:
                 break
-        raw = {k: v for k, v in self.raw.items()}
+        raw = dict(self.raw)
         raw["mission"] = dict(raw["mission"], phases=phases)
         return parse_config(raw, self.source)

@@ -7,10 +7,10 @@ its :class:`ControllerSpec` in :mod:`gcs.control.registry`.
 
 from __future__ import annotations
 
-from gcs.control.base import Controller, FiniteHorizonController, Limits, steps_to_go
+from gcs.control.base import NO_DISTURBANCE, Controller, FiniteHorizonController, Limits, steps_to_go
 from gcs.control.registry import (
     CONTROLLERS, REGISTRY, ControllerSpec, controller_spec, limits_of, make_controller, model_params,
 )
 
 __all__ = ["CONTROLLERS", "REGISTRY", "Controller", "ControllerSpec", "FiniteHorizonController", "Limits",
-           "controller_spec", "make_controller", "model_params", "limits_of", "steps_to_go"]
+           "controller_spec", "make_controller", "model_params", "limits_of", "steps_to_go", "NO_DISTURBANCE"]

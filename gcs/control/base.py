@@ -7,18 +7,32 @@ functions in the controller modules) and then *stepped*:
 both :class:`gcs.model.State` in the paper frame.  Commands are saturated to
 the vehicle limits, so what a controller returns is what the vehicle gets
 (the NLSOC lateral laws need the thrust actually applied).
+
+``step(k, state, ref, disturbance_m_s2=d)`` also takes an estimated steady disturbance
+acceleration ``d`` (x, y, z up) [m/s^2], an acceleration eq. 1 does not have: each law
+compensates it where its model has gravity (:func:`gcs.model.disturbance_tilt` and the
+laws' docstrings).  It is :data:`NO_DISTURBANCE` unless an estimator gives one, and then the
+laws compute exactly what they computed without it.
 """
 
 from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from gcs.config import AFTER_HORIZON
 from quadrotor.state import Command, State
 
-__all__ = ["Controller", "Limits", "FiniteHorizonController", "StagedLaw", "steps_to_go", "horizon_mode", "wrap_angle"]
+__all__ = ["Controller", "Limits", "FiniteHorizonController", "StagedLaw", "steps_to_go", "horizon_mode", "wrap_angle",
+           "NO_DISTURBANCE", "Disturbance"]
+
+
+#: A disturbance acceleration (x, y, z up) [m/s^2].
+Disturbance = Sequence[float]
+#: No disturbance: what every law assumes unless it is given one.
+NO_DISTURBANCE: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -80,10 +94,11 @@ class Controller(ABC):
     name: str = "controller"
 
     @abstractmethod
-    def step(self, k: int, state: State, ref: State) -> Command:
-        """Command for control step ``k`` (thrust [N], angular accelerations [rad/s^2])."""
+    def step(self, k: int, state: State, ref: State, disturbance_m_s2: Disturbance = NO_DISTURBANCE) -> Command:
+        """Command for control step ``k`` (thrust [N], angular accelerations [rad/s^2]), compensating the
+        disturbance acceleration ``disturbance_m_s2`` (x, y, z up) [m/s^2]."""
 
-    def reset(self) -> None:
+    def reset(self) -> None:  # noqa: B027  optional hook, the default does nothing
         """Forget any per-flight state (none by default)."""
 
 
@@ -91,7 +106,7 @@ class StagedLaw(ABC):
     """A finite-horizon law evaluated with j steps to go (j = 1 is the last step)."""
 
     @abstractmethod
-    def step_j(self, j: int, state: State, ref: State) -> Command:
+    def step_j(self, j: int, state: State, ref: State, disturbance_m_s2: Disturbance = NO_DISTURBANCE) -> Command:
         """Command with ``j`` steps to go."""
 
 
@@ -118,12 +133,12 @@ class FiniteHorizonController(Controller):
         self.fallback = fallback
         self.last_steps_to_go: int | None = None
 
-    def step(self, k: int, state: State, ref: State) -> Command:
+    def step(self, k: int, state: State, ref: State, disturbance_m_s2: Disturbance = NO_DISTURBANCE) -> Command:
         j = steps_to_go(k, self.horizon_steps, self.after)
         self.last_steps_to_go = j
         if j is None:
-            return self.fallback.step(k, state, ref)  # type: ignore[union-attr]
-        return self.law.step_j(j, state, ref)
+            return self.fallback.step(k, state, ref, disturbance_m_s2)  # type: ignore[union-attr]
+        return self.law.step_j(j, state, ref, disturbance_m_s2)
 
     def reset(self) -> None:
         self.last_steps_to_go = None

@@ -7,6 +7,8 @@ models of :mod:`gcs.model` (eq. 4 for z and yaw, eq. 8 for y-phi and its x-theta
 ``u = -F(N - k) x`` (eq. 6).  Policy: z through the exact linearisation
 ``u = m (u1 + g) / (cos(theta) cos(phi))`` (eq. 3), yaw, and the small-angle y-phi and
 x-theta subsystems, all in error coordinates (state - reference, attitude references 0).
+A disturbance acceleration ``d`` enters the inversions: ``u = m (u1 + g - d_z) / (cos(theta) cos(phi))``
+and the attitude references become the tilt that balances it (:func:`gcs.model.disturbance_tilt`).
 """
 
 from __future__ import annotations
@@ -17,10 +19,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from gcs.config import Config
-from gcs.control.base import Controller, FiniteHorizonController, Limits, StagedLaw, wrap_angle
+from gcs.control.base import (NO_DISTURBANCE, Controller, Disturbance, FiniteHorizonController, Limits, StagedLaw,
+                              wrap_angle)
 from gcs.control.riccati import finite_horizon_lqr
 from gcs.errors import DesignError
-from gcs.model import ModelParams, linear_psi, linear_x_theta, linear_y_phi, linear_z, tilt_cos
+from gcs.model import ModelParams, disturbance_tilt, linear_psi, linear_x_theta, linear_y_phi, linear_z, tilt_cos
 from quadrotor.state import Command, State
 
 __all__ = ["finite_horizon_lqr", "LOC_SUBSYSTEMS", "loc_models", "LocDesign", "design_loc", "design_loc_from_config",
@@ -114,12 +117,15 @@ class LocLaw(StagedLaw):
         self._settled = settled
         self._fz, self._fpsi, self._fy, self._fx = (t[:settled, 0, :].tolist() for t in tables)
 
-    def step_j(self, j: int, state: State, ref: State) -> Command:
+    def step_j(self, j: int, state: State, ref: State, disturbance_m_s2: Disturbance = NO_DISTURBANCE) -> Command:
         i = (j if j < self._settled else self._settled) - 1
-        phi, th = state[6], state[7]
+        dx, dy, dz = disturbance_m_s2
+        m, g = self.model.mass_kg, self.model.gravity_m_s2
         fz = self._fz[i]
         u1 = -(fz[0] * (state[2] - ref[2]) + fz[1] * (state[5] - ref[5]))
-        thrust = self.model.mass_kg * (u1 + self.model.gravity_m_s2) / tilt_cos(phi, th)
+        thrust = m * (u1 + (g - dz)) / tilt_cos(state[6], state[7])
+        phi_d, th_d = disturbance_tilt(thrust, m, g, dx, dy)
+        phi, th = state[6] - phi_d, state[7] - th_d
         fp = self._fpsi[i]
         t_yaw = -(fp[0] * wrap_angle(state[8] - ref[8]) + fp[1] * (state[11] - ref[11]))
         fy = self._fy[i]

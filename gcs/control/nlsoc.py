@@ -21,6 +21,12 @@ Applied to the models of :mod:`gcs.model` in error coordinates: z-psi (eq. 16,
 ``nlsoc-literal`` flies the printed law, which does not compensate gravity.
 The x-theta matrices are the y-phi ones mirrored, ``E = S E S`` with
 ``S = diag(-1, -1, 1, 1)`` (erratum 6), unless the printed matrices are asked for.
+
+A disturbance acceleration ``d`` (``step(..., disturbance_m_s2=d)``) enters f0 as gravity does
+(:mod:`gcs.model`): the compensated thrust carries ``m (g - d_z) / (cos(theta) cos(phi))`` (the
+literal law has ``-(g - d_z) Ts`` in f0), the lateral f0 have ``+ Ts d`` in their velocity rows,
+and their angle states are measured from the tilt that balances ``d`` (:func:`gcs.model.disturbance_tilt`),
+as the thrust is measured from hover: in steady state the law then holds the set point.
 """
 
 from __future__ import annotations
@@ -32,10 +38,11 @@ from typing import Protocol
 import numpy as np
 
 from gcs.config import Config
-from gcs.control.base import Controller, FiniteHorizonController, Limits, StagedLaw, wrap_angle
+from gcs.control.base import (NO_DISTURBANCE, Controller, Disturbance, FiniteHorizonController, Limits, StagedLaw,
+                              wrap_angle)
 from gcs.control.smallmat import dot, mat_vec, vec_mat
 from gcs.errors import DesignError
-from gcs.model import AffineContext, ModelParams, XThetaModel, YPhiModel, ZPsiModel, tilt_cos
+from gcs.model import AffineContext, ModelParams, XThetaModel, YPhiModel, ZPsiModel, disturbance_tilt, tilt_cos
 from quadrotor.state import Command, State
 
 __all__ = ["one_step_control", "one_step_law", "AffineSubsystem", "NlsocDesign", "design_nlsoc",
@@ -295,20 +302,25 @@ class NlsocLaw(StagedLaw):
         self._ctx = AffineContext()
         self._hover_n = model.hover_thrust_n if design.gravity_compensated else None
 
-    def step_j(self, j: int, state: State, ref: State) -> Command:
+    def step_j(self, j: int, state: State, ref: State, disturbance_m_s2: Disturbance = NO_DISTURBANCE) -> Command:
         d = self.design
         ctx = self._ctx
         phi, th = state[6], state[7]
         ctx.set_attitude(phi, th)
+        ctx.accel_x, ctx.accel_y, ctx.accel_z = dx, dy, dz = disturbance_m_s2
         ez = (state[2] - ref[2], state[5] - ref[5], wrap_angle(state[8] - ref[8]), state[11] - ref[11])
         du, t_yaw = d.z_psi.control(j, ez, ctx)
-        # erratum 8: the compensated law's input is the thrust beyond hover
-        thrust = du if self._hover_n is None else self._hover_n / tilt_cos(phi, th) + du
+        # erratum 8: the compensated law's input is the thrust beyond hover (hover against g - d_z)
+        hover = self._hover_n
+        if hover is not None and dz:
+            hover = self.model.mass_kg * (self.model.gravity_m_s2 - dz)
+        thrust = du if hover is None else hover / tilt_cos(phi, th) + du
         umax = self.limits.max_thrust_n
         ctx.thrust_n = thrust = 0.0 if thrust < 0.0 else umax if thrust > umax else thrust
-        ey = (state[1] - ref[1], state[4] - ref[4], phi, state[9])
+        phi_d, th_d = disturbance_tilt(thrust, self.model.mass_kg, self.model.gravity_m_s2, dx, dy)
+        ey = (state[1] - ref[1], state[4] - ref[4], phi - phi_d, state[9])
         (t_roll,) = d.y_phi.control(j, ey, ctx)
-        ex = (state[0] - ref[0], state[3] - ref[3], th, state[10])
+        ex = (state[0] - ref[0], state[3] - ref[3], th - th_d, state[10])
         (t_pitch,) = d.x_theta.control(j, ex, ctx)
         return self.limits.saturate(thrust, t_roll, t_pitch, t_yaw)
 

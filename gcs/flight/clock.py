@@ -1,6 +1,8 @@
 """The flight's clocks and its one way of waiting: on the injected clock, never on the wall directly.
 
-:class:`VehicleClock` is lockstep time — the vehicle's own telemetry time stamps.
+:class:`VehicleClock` is lockstep time — the vehicle's own telemetry time stamps;
+:class:`PacedVehicleClock` is the same time line for a vehicle that runs by itself (a firmware
+SITL at ``--speedup S``: the loop follows its time, S times faster than the wall).
 :func:`wait_until` is how the preflight, the landing and the sessions wait for something
 (a mode, a touchdown, fresh telemetry): one control period at a time on the flight's clock,
 calling ``step`` each period (a setpoint: it keeps a guided vehicle fed and moves a lockstep
@@ -11,11 +13,11 @@ link's business and stay in wall time.
 from __future__ import annotations
 
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from quadrotor.clock import Clock, ManualClock, MonotonicClock
 
-__all__ = ["VehicleClock", "SimClock", "wait_until", "Clock", "MonotonicClock", "ManualClock"]
+__all__ = ["VehicleClock", "PacedVehicleClock", "SimClock", "wait_until", "Clock", "MonotonicClock", "ManualClock"]
 
 
 class VehicleClock:
@@ -76,6 +78,82 @@ class VehicleClock:
         else:
             self._lost = False
         self._virtual_ns = max(self._virtual_ns, deadline_ns)
+
+
+class PacedVehicleClock:
+    """The vehicle's own time (its telemetry time stamps) for a vehicle that runs by itself.
+
+    Parameters
+    ----------
+    vehicle_time_ns : callable () -> int
+        The newest vehicle time stamp received [ns].
+    pump : callable (wait_s)
+        Receive from the link, waiting at most ``wait_s`` when nothing is there.
+    speedup : float
+        Vehicle seconds per wall second (a firmware SITL's ``--speedup``; 1 for a real vehicle).
+    max_ahead_s : float
+        How far past the newest time stamp the clock runs on the wall (times ``speedup``) before
+        it waits for the vehicle [vehicle s].
+    max_wait_s : float
+        Wall time beyond the nominal ``(deadline - now) / speedup`` to wait for the vehicle's time
+        to reach a deadline before giving up on it.
+
+    Between two time stamps the clock runs at ``speedup`` times the wall from the newest one, at
+    most ``max_ahead_s`` past it: the loop's ticks fall on their deadlines whatever the spacing of
+    the telemetry, and a vehicle that runs slower than ``speedup`` (a SITL starved of CPU) holds
+    the clock back instead of being overtaken by it.  It never goes back.  When the vehicle falls
+    silent the clock moves on by itself at ``speedup`` times the wall (a silent vehicle ages the
+    telemetry and trips the failsafe in the same vehicle time as a live one); :attr:`timeouts`
+    counts those steps.  Not lockstep: the vehicle does not wait for the ground station, and a
+    late tick is skipped.
+    """
+
+    lockstep = False
+
+    def __init__(self, vehicle_time_ns: Callable[[], int], pump: Callable[[float], None], speedup: float = 1.0,
+                 max_ahead_s: float = 0.02, max_wait_s: float = 0.05) -> None:
+        if not speedup > 0:
+            raise ValueError(f"speedup must be positive, got {speedup!r}")
+        self.vehicle_time_ns = vehicle_time_ns
+        self.pump = pump
+        self.speedup = float(speedup)
+        self.max_ahead_ns = int(max_ahead_s * 1e9)
+        self.max_wait_s = max_wait_s
+        self._now = 0
+        self._anchor_ns = -1
+        self._anchor_wall = 0.0
+        self._silent = False
+        self.timeouts = 0
+
+    def now_ns(self) -> int:
+        v = self.vehicle_time_ns()
+        wall = time.monotonic()
+        if v != self._anchor_ns:
+            self._anchor_ns, self._anchor_wall = v, wall
+        ahead = min(int((wall - self._anchor_wall) * self.speedup * 1e9), self.max_ahead_ns)
+        if v + ahead > self._now:
+            self._now = v + ahead
+        return self._now
+
+    def sleep_until_ns(self, deadline_ns: int) -> None:
+        heard = self._anchor_ns
+        while True:
+            now = self.now_ns()
+            if now >= deadline_ns:
+                break
+            # Silent = no new time stamp for as long as the vehicle needs to reach the deadline from its
+            # newest one (plus a grace, none once silent): a vehicle that speaks but lags is waited for.
+            grace = 0.0 if self._silent and self._anchor_ns == heard else self.max_wait_s
+            budget = (deadline_ns - self._anchor_ns) / 1e9 / self.speedup + grace
+            quiet = time.monotonic() - self._anchor_wall
+            if quiet >= budget - 1e-6:  # (a microsecond short is as good as there)
+                self.timeouts += 1
+                self._silent = True
+                self._now = deadline_ns  # the vehicle is silent: its time goes on without it
+                return
+            self.pump(min(budget - quiet, max(0.0, (deadline_ns - now) / 1e9 / self.speedup), 0.005))
+        if self._anchor_ns != heard:
+            self._silent = False
 
 
 class SimClock:

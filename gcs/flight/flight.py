@@ -8,7 +8,8 @@ whatever happens.
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import Any
+from collections.abc import Callable
 
 from gcs.config import Config
 from gcs.control import make_controller

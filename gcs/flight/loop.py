@@ -5,7 +5,8 @@ Parts: the clock (of the :class:`~gcs.flight.context.FlightContext`), the vehicl
 mission reference (:class:`gcs.mission.Mission`), the controller, the safety envelope
 (optional), the flight log (the context's recorder) and the loop statistics (optional).
 Each tick runs on absolute deadlines of the clock (no drift): wait, pump the telemetry,
-estimate, failsafes and interrupts, reference, controller, envelope, send, record.
+estimate, failsafes and interrupts, reference, controller (with the session's estimated
+disturbance acceleration, zero where none is estimated), envelope, send, record.
 Nothing here reads wall time except the per-stage timing of :class:`~gcs.flight.stats.LoopStats`.
 
 The exit reasons are :mod:`gcs.flight.result`'s; a failsafe ends the tick loop and the
@@ -18,7 +19,8 @@ from __future__ import annotations
 import time
 import traceback
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
+from collections.abc import Callable
 
 import numpy as np
 
@@ -59,6 +61,7 @@ class _Track:
     phase_idx: int = -1
     handled_interrupts: int = 0
     next_live_s: float = 0.0
+    next_housekeeping_k: int = 0
     log_prev_ns: int = 0
     last_cmd: Command | None = None
 
@@ -71,7 +74,7 @@ class MissionLoop:
     ctx : FlightContext
     controller_name : str
     controller : Controller
-        Designed; stepped ``controller.step(k, state, reference)``.
+        Designed; stepped ``controller.step(k, state, reference, disturbance_m_s2=session.disturbance_m_s2())``.
     session : VehicleSession
     envelope : SafetyEnvelope or None
         Limits, tilt guard and geofence (None: the command goes as the controller gave it).
@@ -173,7 +176,7 @@ class MissionLoop:
             ref = self._reference(k, t, state, tr)
             if ref is None:
                 return "interrupted" if tr.handled_interrupts else "completed"
-            raw = self.controller.step(k, state, ref)
+            raw = self.controller.step(k, state, ref, disturbance_m_s2=session.disturbance_m_s2())
             cmd, reason = self._limit(t, state, raw)
             if reason is not None:
                 return reason
@@ -186,7 +189,8 @@ class MissionLoop:
             if fault is not None:  # the output guard blocked the command (a safe one went instead)
                 return fault[0]
             self._record(k, wake, late, state, truth, ref, raw, cmd, tr, (c0, c1, c2, c3, c4))
-            if k % self.ticks_per_second == 0:
+            if k >= tr.next_housekeeping_k:  # once a second, skipped ticks or not (a GCS heartbeat among it)
+                tr.next_housekeeping_k = k + self.ticks_per_second
                 session.housekeeping()
             if self.live_period_s and t >= tr.next_live_s:
                 tr.next_live_s = t + self.live_period_s
@@ -227,7 +231,8 @@ class MissionLoop:
                 return "geofence"
         lost = session.control_lost()
         if lost is not None:
-            ctx.event("failsafe", f"the vehicle left {session.control_name} at t = {t:.2f} s ({lost}): stopping setpoints")
+            ctx.event("failsafe",
+                      f"the vehicle left {session.control_name} at t = {t:.2f} s ({lost}): stopping setpoints")
             return "vehicle_took_over"
         return self._interrupted(k, t, state, tr)
 

@@ -59,7 +59,7 @@ class FlightResult:
 
     @classmethod
     def refused(cls, controller: str, config: str, reason: str, detail: str, events: list | None = None
-                ) -> "FlightResult":
+                ) -> FlightResult:
         """A flight that never flew (refused, a link error, an internal error before the mission)."""
         return cls(controller, config, reason, 0.0, {}, {"ticks": 0, "deadline_misses": 0, "jitter_p99_ms": 0.0,
                                                          "tick_p99_ms": 0.0}, list(events or []), detail=detail)

@@ -97,7 +97,10 @@ class SafetyEnvelope:
         """
         lim = self.limits
         a = lim.max_angular_accel_rad_s2
-        clip = lambda v: a if v > a else -a if v < -a else v
+
+        def clip(v):
+            return a if v > a else -a if v < -a else v
+
         return Command(min(max(thrust_n, 0.0), lim.max_thrust_n),
                        clip(-lim.level_kp * state.roll - lim.level_kd * state.roll_rate),
                        clip(-lim.level_kp * state.pitch - lim.level_kd * state.pitch_rate),

@@ -3,14 +3,15 @@
 Three implementations: a MAVLink autopilot (:class:`gcs.vehicles.mavlink.MavlinkSession`, whose
 firmware conventions are an autopilot profile), the 4-DOF rig (:class:`gcs.vehicles.rig.RigSession`)
 and the in-process plant of ``gcs sim`` (:class:`gcs.vehicles.plant.PlantSession`).  The loop
-(:class:`gcs.flight.loop.MissionLoop`) calls, each tick: :meth:`pump`, :meth:`estimate`, the
-checks (:meth:`fresh`, :meth:`health`, :meth:`control_lost`), then :meth:`send`; once a second
-:meth:`housekeeping`; after the mission :meth:`finish`.
+(:class:`gcs.flight.loop.MissionLoop`) calls, each tick: :meth:`pump`, :meth:`estimate`,
+:meth:`disturbance_m_s2`, the checks (:meth:`fresh`, :meth:`health`, :meth:`control_lost`),
+then :meth:`send`; once a second :meth:`housekeeping`; after the mission :meth:`finish`.
 """
 
 from __future__ import annotations
 
-from typing import Protocol, Sequence
+from typing import Protocol
+from collections.abc import Sequence
 
 from gcs.flight.context import FlightContext
 from quadrotor.state import Command, State
@@ -45,6 +46,10 @@ class VehicleSession(Protocol):
 
     def truth(self) -> State | None:
         """The true state (a simulation's), or None for a real vehicle."""
+
+    def disturbance_m_s2(self) -> tuple[float, float, float]:
+        """The estimated steady disturbance acceleration (x, y, z up; paper frame) [m/s^2] the
+        controller compensates; zeros where none is estimated."""
 
     def fresh(self, now_ns: int, stale_s: float) -> bool:
         """Telemetry newer than ``stale_s``."""

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Callable
+from collections.abc import Callable
 
 __all__ = ["TelemetryLimits", "TelemetryValidator"]
 
@@ -92,10 +92,7 @@ class TelemetryValidator:
 
     @staticmethod
     def _finite(*values: float) -> bool:
-        for v in values:
-            if not math.isfinite(v):
-                return False
-        return True
+        return all(math.isfinite(v) for v in values)
 
     def attitude(self, roll: float, pitch: float, yaw: float, p: float, q: float, r: float, time_ms: int | None,
                  message: str = "ATTITUDE") -> bool:

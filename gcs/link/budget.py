@@ -16,7 +16,7 @@ acknowledgements and retries).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Iterable
+from collections.abc import Iterable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -132,7 +132,8 @@ def suggest_fixes(budget: LinkBudget, control_rate_hz: float, output: str = "att
     for tel in (50.0, 25.0, 20.0, 10.0):
         nb = compute_budget(control_streams(control_rate_hz, tel, output), budget.baud, signed=budget.signed,
                             max_utilisation=budget.max_utilisation,
-                            air_rate_bps=None if budget.air_capacity_bytes_s is None else budget.air_capacity_bytes_s * 8,
+                            air_rate_bps=(None if budget.air_capacity_bytes_s is None
+                                          else budget.air_capacity_bytes_s * 8),
                             ecc=False)
         if nb.fits:
             out.append(f"--telemetry-rate {tel:g} (the estimator fills the gaps): "
@@ -157,7 +158,8 @@ def format_budget(budget: LinkBudget) -> str:
         fb = frame_bytes(s.message, budget.signed)
         lines.append(f"{s.direction:<6} {s.message:<28} {s.rate_hz:>9g} {fb:>9d} {fb * s.rate_hz:>8.0f}  {s.why}")
     cap = budget.capacity_bytes_s
-    lines.append(f"serial {budget.baud} baud 8N1: {cap:.0f} B/s each way; MAVLink 2{' signed' if budget.signed else ''}")
+    lines.append(f"serial {budget.baud} baud 8N1: {cap:.0f} B/s each way; "
+                 f"MAVLink 2{' signed' if budget.signed else ''}")
     lines.append(f"down {budget.down_bytes_s:.0f} B/s = {budget.down_utilisation:.0%}, "
                  f"up {budget.up_bytes_s:.0f} B/s = {budget.up_utilisation:.0%} (limit {budget.max_utilisation:.0%})")
     if budget.air_capacity_bytes_s is not None:

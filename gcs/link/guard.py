@@ -47,10 +47,7 @@ class GuardLimits:
 
 
 def _finite(values) -> bool:
-    for v in values:
-        if not math.isfinite(v):
-            return False
-    return True
+    return all(math.isfinite(v) for v in values)
 
 
 @dataclass

@@ -21,31 +21,28 @@ The link knows nothing of the paper's frame; :mod:`gcs.flight.telemetry` convert
 from __future__ import annotations
 
 import errno
-import hashlib
 import os
 import struct
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Iterable
+from collections.abc import Callable, Iterable
 
 # MAVLink 2 on the wire (signing, extensions): pymavlink picks its protocol module from this
 # variable, so it is set before the dialect is loaded.
 os.environ["MAVLINK20"] = "1"
 
-from pymavlink import mavutil  # noqa: E402
-from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-mavutil.set_dialect("ardupilotmega")
-
-from quadrotor.errors import ConfigError
 from gcs.errors import GcsError
 from gcs.link.guard import OutputGuard, UnsafeCommand
 from gcs.link.base import MessageWaiter
 from quadrotor.mavlink.framing import parse_bytes, reset_parser
-from quadrotor.mavlink.modes import COPTER_MODES
 from quadrotor.mavlink.signing import SignatureCheck, setup_signing
 
-__all__ = ["LinkError", "MavlinkLink", "LinkCounters", "connection_url"]
+mavutil.set_dialect("ardupilotmega")
+
+__all__ = ["LinkError", "MavlinkLink", "LinkCounters"]
 
 
 
@@ -75,15 +72,6 @@ class LinkCounters:
     #: Outgoing messages the output guard blocked (never sent).
     blocked: int = 0
     by_type: dict[str, int] = field(default_factory=dict)
-
-
-def connection_url(port: str | None, connect: str | None) -> str:
-    """The pymavlink URL from ``--port DEVICE`` or ``--connect URL`` (exactly one given)."""
-    if (port is None) == (connect is None):
-        raise ValueError("give exactly one of port and connect")
-    if port is not None:
-        return port
-    return connect  # type: ignore[return-value]
 
 
 class MavlinkLink(MessageWaiter):
@@ -143,9 +131,7 @@ class MavlinkLink(MessageWaiter):
     # ------------------------------------------------------------------ receive
     def _allow_unsigned(self, mav, msg_id: int) -> bool:
         """pymavlink asks this for unsigned frames and for signed frames that failed their check."""
-        if msg_id == mavlink.MAVLINK_MSG_ID_RADIO_STATUS:
-            return True
-        return False
+        return msg_id == mavlink.MAVLINK_MSG_ID_RADIO_STATUS
 
     def _accept(self, msg, addr=None) -> bool:
         c = self.counters
@@ -330,13 +316,6 @@ class MavlinkLink(MessageWaiter):
         return self.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, [message_id, _interval_us(rate_hz)],
                                  on_message=on_message)
 
-    def set_mode(self, mode: str, on_message=None) -> int:
-        """MAV_CMD_DO_SET_MODE with an ArduCopter custom mode name."""
-        if mode not in COPTER_MODES:
-            raise ValueError(f"unknown mode {mode!r}")
-        return self.command_long(mavlink.MAV_CMD_DO_SET_MODE,
-                                 [mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, COPTER_MODES[mode]], on_message=on_message)
-
     def arm(self, arm: bool = True, force: bool = False, on_message=None) -> int:
         """MAV_CMD_COMPONENT_ARM_DISARM (400); ``force`` uses the magic 21196."""
         return self.command_long(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, [1.0 if arm else 0.0, 21196.0 if force else 0.0],
@@ -410,29 +389,3 @@ def _param_id(msg) -> str:
     if isinstance(pid, bytes):
         pid = pid.decode(errors="replace")
     return pid.rstrip("\x00")
-
-
-def read_signing_key(path: str) -> bytes:
-    """A 32-byte key from a file: raw 32 bytes, or 64 hex characters, or a passphrase (SHA-256 of it).
-
-    Raises
-    ------
-    ConfigError
-        The file cannot be read or is empty (a bad option: exit 2).
-    """
-    try:
-        with open(path, "rb") as fh:
-            data = fh.read(4096)
-    except OSError as exc:
-        raise ConfigError("--signing-key", "", f"cannot read {path!r}: {exc.strerror or exc}") from None
-    if len(data) == 32:
-        return data
-    text = data.strip()
-    try:
-        if len(text) == 64:
-            return bytes.fromhex(text.decode())
-    except ValueError:
-        pass
-    if not text:
-        raise ConfigError("--signing-key", "", f"{path!r} is empty")
-    return hashlib.sha256(text).digest()

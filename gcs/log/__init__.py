@@ -112,7 +112,3 @@ Modules: :mod:`~gcs.log.topics` (names, fields, schemas), :mod:`~gcs.log.records
 attachments, log file names), :mod:`gcs.log.mcap` (the format layer), :mod:`gcs.log.review` (the
 ``gcs log`` tools).
 """
-
-from gcs.log.writer import FlightLog, check_writable
-
-__all__ = ["FlightLog", "check_writable"]

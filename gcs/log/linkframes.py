@@ -81,7 +81,7 @@ class LinkDecoder:
         if decoded:
             try:
                 msg = self._mavlink_parser().decode(bytearray(data))
-            except Exception:  # pymavlink raises its own MAVError and struct/index errors on odd frames
+            except Exception:  # noqa: BLE001  pymavlink raises its own MAVError and struct/index errors on odd frames
                 self.undecodable += 1
         if msg is not None and msg.get_type() != "BAD_DATA":
             return mavlink_items(direction, msg)

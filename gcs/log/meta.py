@@ -10,22 +10,22 @@ Attachments written by :func:`write_run_header`:
 
 from __future__ import annotations
 
-import os
-
-from pathlib import Path
-
 import dataclasses
 import datetime as _dt
 import json
+import os
 import sys
 from collections.abc import Iterable, Mapping
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from gcs import __version__
+from gcs.config import resolve_config_path
 
-__all__ = ["default_log_path", "LOG_DIR", "designed_gains", "run_attachments", "run_metadata", "utc_stamp", "write_run_header"]
+__all__ = ["default_log_path", "LOG_DIR", "designed_gains", "run_attachments", "run_metadata", "utc_stamp",
+           "write_run_header"]
 
 
 def utc_stamp(now: _dt.datetime | None = None) -> str:
@@ -102,7 +102,6 @@ def run_metadata(config: Any, controllers: Iterable[str], **extra: Any) -> dict[
 def run_attachments(config: Any, designed: Mapping[str, Any] = {}) -> list[tuple[str, str, bytes]]:
     """``(name, media type, data)`` of ``config.json``, ``config.toml`` (if readable) and ``gains/<name>.json``."""
     out = [("config.json", "application/json", json.dumps(dict(config.raw), indent=1).encode())]
-    from gcs.config import resolve_config_path
     try:
         text = resolve_config_path(config.source).read_bytes()
     except (OSError, ValueError, TypeError):  # ConfigError is a ValueError: no file behind the source

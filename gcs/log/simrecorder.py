@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from gcs.control.base import horizon_mode
 from gcs.log.records import SIMULATED, Event, FlightEnd, FlightStart, Metrics, TickBlock
 from gcs.log.sink import InlineSink
 from gcs.log.writer import FlightLog
@@ -39,7 +40,6 @@ BYTES_PER_TICK = 700
 
 def horizon_modes(k0: int, n: int, horizon_steps: int | None, after: str | None) -> list[str]:
     """Mode of ticks k0 .. k0 + n - 1 (:func:`gcs.control.base.horizon_mode` of each)."""
-    from gcs.control.base import horizon_mode
 
     if horizon_steps is None:
         return ["pd"] * n

@@ -14,7 +14,9 @@ When the writer falls behind, ``overflow`` decides:
 * ``"drop"`` (``gcs fly``): the records are written to a non-blocking pipe from the
   producer's thread — the control loop pays for one pickling and one ``os.write`` — and kept
   in a local buffer of up to :data:`MAX_BACKLOG_BYTES` while the pipe is full; beyond that they
-  are dropped and counted: the loop never waits for the log.  The writer runs niced.
+  are dropped and counted: the loop never waits for the log.  The writer runs niced; the pipe
+  is enlarged to :data:`PIPE_BYTES` so that a backlog while it is starved of CPU sits in the
+  kernel, not here: records handed over survive a SIGKILL of the producer.
 * ``"wait"`` (``gcs sim``): every record reaches the file.  A sender thread writes the
   frames, so the simulation neither waits for the writer to start nor for each block to be
   taken; it waits only when ``max_pending`` frames are queued.
@@ -41,10 +43,12 @@ from gcs.log.mcap.writer import check_writable
 from gcs.log.records import Attachment, CloseLog, FlightStart, LogDone, LogFailed, Metadata, OpenLog
 from gcs.log.writer import FlightLog
 
-__all__ = ["MAX_BACKLOG_BYTES", "WRITER_NICE", "BackgroundSink", "InlineSink", "spawn_writer"]
+__all__ = ["MAX_BACKLOG_BYTES", "PIPE_BYTES", "WRITER_NICE", "BackgroundSink", "InlineSink", "spawn_writer"]
 
 #: Records kept here while the writer process cannot take them, before they are dropped [bytes].
 MAX_BACKLOG_BYTES = 8 << 20
+#: Size asked for the pipe to the writer (Linux; capped by /proc/sys/fs/pipe-max-size) [bytes].
+PIPE_BYTES = 1 << 20
 #: Niceness of a writer beside a real-time loop (the loop, and a SITL beside it, come first).
 WRITER_NICE = 10
 
@@ -134,10 +138,29 @@ def spawn_writer(path: Path) -> subprocess.Popen:
     root = str(Path(gcs.__file__).resolve().parent.parent)
     env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     try:
-        return subprocess.Popen([sys.executable, "-P", "-m", "gcs.log.worker"], stdin=subprocess.PIPE,
+        proc = subprocess.Popen([sys.executable, "-P", "-m", "gcs.log.worker"], stdin=subprocess.PIPE,
                                 stdout=subprocess.PIPE, env=env, start_new_session=True)
     except OSError as exc:
         raise LogError(f"{path}: cannot start the log writer process: {exc.strerror or exc}") from None
+    enlarge_pipe(proc.stdin.fileno())  # type: ignore[union-attr]
+    return proc
+
+
+def enlarge_pipe(fd: int, size: int = PIPE_BYTES) -> int:
+    """Ask for a pipe of ``size`` bytes (or the system's maximum); the size it has now [bytes]."""
+    setsz = getattr(fcntl, "F_SETPIPE_SZ", None)
+    if setsz is None:  # not Linux: the default pipe
+        return 0
+    try:
+        cap = int(Path("/proc/sys/fs/pipe-max-size").read_text())
+    except (OSError, ValueError):
+        cap = size
+    for want in (size, min(size, cap)):
+        try:
+            return fcntl.fcntl(fd, setsz, want)
+        except OSError:  # EPERM above the cap for an unprivileged process, EBUSY: keep what it has
+            continue
+    return fcntl.fcntl(fd, fcntl.F_GETPIPE_SZ)
 
 
 class _NonBlockingPipe:
@@ -359,7 +382,7 @@ class BackgroundSink(_SinkBase):
         """The writer's answer (:class:`LogDone` / :class:`LogFailed`; None without one), once it has exited."""
         try:
             answer = read_frame(self._proc.stdout)  # type: ignore[arg-type]
-        except Exception:  # a garbled answer: as good as none
+        except Exception:  # noqa: BLE001  a garbled answer: as good as none
             answer = None
         try:
             self._proc.wait(timeout_s)

@@ -33,7 +33,7 @@ def _read_ahead(inp: Any, pending: queue.Queue) -> None:
     while True:
         try:
             records = read_frame(inp)
-        except Exception as exc:  # a garbled frame (the producer died mid-write): keep what we have
+        except Exception as exc:  # noqa: BLE001  a garbled frame (the producer died mid-write): keep what we have
             pending.put(f"cannot read the log records: {type(exc).__name__}: {exc}")
             return
         pending.put(records)
@@ -61,7 +61,7 @@ def _write(encoder: Any, inp: Any) -> str | None:
                 encoder.write(r)
     except LogError as exc:
         return str(exc)
-    except Exception as exc:  # a process boundary: report any failure to the producer, then finish the file
+    except Exception as exc:  # noqa: BLE001  process boundary: report any failure to the producer, then finish the file
         return f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"
 
 

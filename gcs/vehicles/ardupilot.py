@@ -7,10 +7,28 @@ here, so that another family (PX4) is another profile:
 * modes: GUIDED_NOGPS to fly in (GUIDED accepted too), LAND to land, by
   MAV_CMD_DO_SET_MODE with ArduCopter's custom mode numbers, names from
   :mod:`quadrotor.mavlink.modes`;
-* parameters set for the flight and restored after it: GUID_OPTIONS bit 3 (the
-  SET_ATTITUDE_TARGET thrust field is thrust, not a climb rate) and ATC_ANGLE_BOOST = 0
-  (the controllers divide by cos(roll) cos(pitch) themselves); read: MOT_THST_HOVER (the
-  throttle that holds the vehicle) and ATC_ANG_RLL/PIT/YAW_P (the angle gains);
+* parameters set for the flight and restored after it (:meth:`ArduPilotProfile.configure`):
+
+  - GUID_OPTIONS bit 3: the SET_ATTITUDE_TARGET thrust field is thrust, not a climb rate;
+  - ATC_ANGLE_BOOST = 0: the controllers divide by cos(roll) cos(pitch) themselves;
+  - GUID_TIMEOUT = 0.5 s (:data:`GUID_TIMEOUT_S`): with no setpoint for that long ArduCopter
+    levels the vehicle and holds its altitude (a stalled ground station must leave it level;
+    the default 3 s lets the last setpoint act for 3 s);
+  - FS_GCS_ENABLE = 5 (Land) with FS_GCS_TIMEOUT = 3 s (:data:`FS_GCS_TIMEOUT_S`; the firmware
+    allows 2 s at least): with no HEARTBEAT from the ground station (MAV_GCS_SYSID, checked
+    to be ours) for that long the vehicle lands itself.  The session must then send HEARTBEAT
+    at least once a second in every phase, preflight waits included: after a longer gap
+    ArduCopter refuses to arm ("Arm: GCS failsafe on") and disarms a vehicle armed on the ground;
+  - ATC_RATE_FF_ENAB, by output: 0 for ``attitude`` (the angle loop then flies the
+    quaternion unshaped, ``omega = ATC_ANG_*_P e``: :mod:`gcs.vehicles.output`), 1 for
+    ``rates`` (the rate path is shaped and tracked; with 0 the rates become slow attitude
+    increments);
+
+  and read for the output adapters (:class:`OutputParams`): MOT_THST_HOVER (the throttle that
+  holds the vehicle), ATC_ANG_RLL/PIT/YAW_P (angle gains), ATC_ACC_R/P/Y_MAX (the angle loop's
+  square-root limit), ATC_RATE_R/P/Y_MAX (rate limits);
+* ``actuator`` is refused before arming when AUTOPILOT_VERSION says the firmware does not take
+  SET_ACTUATOR_CONTROL_TARGET (ArduCopter has no handler for it);
 * the meaning of the thrust field: ``u / (m g) * MOT_THST_HOVER``, clipped to 0..1;
 * landing: LAND mode, then the vehicle lands and disarms itself;
 * arming refusals: the reason comes as a "PreArm:"/"Arm:" STATUSTEXT.
@@ -18,22 +36,73 @@ here, so that another family (PX4) is another profile:
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.errors import PreflightRefused
+from gcs.link.mavlink import LinkError
 from quadrotor.mavlink.modes import COPTER_MODES, copter_mode_name
 
-__all__ = ["ArduPilotProfile", "OutputParams"]
+__all__ = ["ArduPilotProfile", "OutputParams", "GUID_TIMEOUT_S", "FS_GCS_LAND", "FS_GCS_TIMEOUT_S",
+           "angle_accel_limits"]
+
+#: GUID_TIMEOUT for the flight [s]: a stalled link leaves the vehicle level this soon.
+GUID_TIMEOUT_S = 0.5
+#: FS_GCS_ENABLE for the flight: 5 = Land when the ground station's heartbeats stop.
+FS_GCS_LAND = 5
+#: FS_GCS_TIMEOUT for the flight [s] (ArduCopter's minimum is 2 s; heartbeats go once a second).
+FS_GCS_TIMEOUT_S = 3.0
+#: The ATC_RATE_FF_ENAB each output needs (actuator: not touched).
+RATE_FF_FOR_OUTPUT = {"attitude": 0, "rates": 1}
+_DEG = math.pi / 180.0
+
+
+def angle_accel_limits(acc_max_deg_s2: tuple[float, float, float]) -> tuple[float, float, float]:
+    """The square-root limits [rad/s^2] of ArduCopter's angle loop for ATC_ACC_R/P/Y_MAX [deg/s^2]:
+    half of each, clamped to 40-720 deg/s^2 (roll, pitch) and 10-120 deg/s^2 (yaw); 0 (limit
+    disabled) makes the loop linear (``AC_AttitudeControl::update_ang_vel_target_from_att_error``)."""
+    bounds = ((40.0, 720.0), (40.0, 720.0), (10.0, 120.0))
+    return tuple(0.0 if a <= 0 else min(hi, max(lo, a / 2.0)) * _DEG  # type: ignore[return-value]
+                 for a, (lo, hi) in zip(acc_max_deg_s2, bounds))
 
 
 @dataclass(frozen=True)
 class OutputParams:
-    """What the output adapter needs from the autopilot: hover throttle and angle gains [1/s]."""
+    """What the output adapters need from the autopilot (read, and set, by :meth:`ArduPilotProfile.configure`).
+
+    Attributes
+    ----------
+    hover_throttle : float
+        MOT_THST_HOVER.
+    angle_gain_1_s : (3,) float
+        ATC_ANG_RLL/PIT/YAW_P [1/s].
+    angle_accel_limit_rad_s2 : (3,) float
+        The angle loop's square-root limits (:func:`angle_accel_limits`; 0: linear).
+    rate_limit_rad_s : (3,) float
+        ATC_RATE_R/P/Y_MAX [rad/s] (0: none).
+    output : str or None
+        The output the parameters were set for (None: not yet; see
+        :meth:`ArduPilotProfile.configure_output`).
+    """
 
     hover_throttle: float
     angle_gain_1_s: tuple[float, float, float]
+    angle_accel_limit_rad_s2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rate_limit_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    output: str | None = None
+
+
+def _optional(params, name: str) -> float | None:
+    """A parameter the flight can do without: its value, or None when the vehicle has none (quietly)."""
+    params.check_interrupt()
+    try:
+        value = params.link.param_get(name, timeout_s=1.0, retries=1, on_message=params.on_message)
+    except LinkError:
+        return None
+    return value if math.isfinite(value) else None
 
 
 class ArduPilotProfile:
@@ -60,14 +129,27 @@ class ArduPilotProfile:
         return link.command_long(mavlink.MAV_CMD_DO_SET_MODE, [mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom_mode],
                                  timeout_s=timeout_s, retries=retries, on_message=on_message)
 
-    def configure(self, params) -> OutputParams:
+    def configure(self, params, firmware=None, output: str | None = None) -> OutputParams:
         """Set what the flight needs (restored afterwards by ``params``) and read what the adapters need.
 
         Parameters
         ----------
         params : gcs.vehicles.params.VehicleParams
             Reads, sets and remembers parameters on the vehicle.
+        firmware : gcs.vehicles.firmware.Firmware or None
+            What AUTOPILOT_VERSION said (None: not asked).
+        output : {"attitude", "rates", "actuator"} or None
+            The setpoint the flight sends; None leaves the output's own parameters to
+            :meth:`configure_output` (the returned ``OutputParams.output`` is then None).
+
+        Raises
+        ------
+        PreflightRefused
+            A parameter the flight needs is missing, implausible or not accepted, or the output
+            cannot be flown on this firmware.
         """
+        if output is not None:
+            self.check_output(output, firmware)   # before anything is set
         guid = params.get("GUID_OPTIONS", 0.0)
         if not int(guid) & 8:
             new = params.set("GUID_OPTIONS", float(int(guid) | 8), guid)
@@ -81,13 +163,92 @@ class ArduPilotProfile:
                 raise PreflightRefused("the vehicle did not accept ATC_ANGLE_BOOST = 0 (thrust tilt compensation "
                                        "is done by the controller)")
             params.said("ATC_ANGLE_BOOST 1 -> 0 (the controller compensates tilt)")
+        self._guided_timeout(params)
+        self._gcs_failsafe(params)
         hover = params.get("MOT_THST_HOVER", None)
         if not 0.05 <= hover <= 0.95:
             raise PreflightRefused(f"MOT_THST_HOVER = {hover:g} is not a plausible hover throttle (0.05..0.95)")
         gains = tuple(params.get(f"ATC_ANG_{ax}_P", 4.5) for ax in ("RLL", "PIT", "YAW"))
         if not all(0.1 <= g <= 50.0 for g in gains):
             raise PreflightRefused(f"ATC_ANG_RLL/PIT/YAW_P = {gains} are not plausible angle gains (0.1..50)")
-        return OutputParams(hover, gains)  # type: ignore[arg-type]
+        acc = tuple(params.get(f"ATC_ACC_{ax}_MAX", d) for ax, d in (("R", 1100.0), ("P", 1100.0), ("Y", 270.0)))
+        rate_max = tuple(params.get(f"ATC_RATE_{ax}_MAX", 0.0) for ax in ("R", "P", "Y"))
+        if min(acc) < 0 or min(rate_max) < 0:
+            raise PreflightRefused(f"ATC_ACC_R/P/Y_MAX = {acc}, ATC_RATE_R/P/Y_MAX = {rate_max}: negative limits")
+        out = OutputParams(hover, gains, angle_accel_limits(acc),  # type: ignore[arg-type]
+                           tuple(r * _DEG for r in rate_max))  # type: ignore[arg-type]
+        return out if output is None else self.configure_output(params, output, firmware, out)
+
+    def configure_output(self, params, output: str, firmware, out: OutputParams) -> OutputParams:
+        """What ``output`` needs: refuse ``actuator`` where the firmware does not take it, set
+        ATC_RATE_FF_ENAB (:data:`RATE_FF_FOR_OUTPUT`); ``out`` marked as configured for ``output``.
+
+        Raises
+        ------
+        PreflightRefused
+            ``actuator`` on a firmware whose AUTOPILOT_VERSION lacks the capability, or
+            ATC_RATE_FF_ENAB missing or not accepted.
+        """
+        self.check_output(output, firmware)
+        want = RATE_FF_FOR_OUTPUT.get(output)
+        if want is not None:
+            ff = params.get("ATC_RATE_FF_ENAB", None)
+            if int(ff) != want:
+                new = params.set("ATC_RATE_FF_ENAB", float(want), ff)
+                if int(new) != want:
+                    raise PreflightRefused(f"the vehicle did not accept ATC_RATE_FF_ENAB = {want} (the {output} "
+                                           "output needs it)")
+                params.said(f"ATC_RATE_FF_ENAB {int(ff)} -> {want} ({output} output: "
+                            + ("the angle loop flies the target unshaped)" if want == 0 else
+                               "rate targets are shaped and tracked)"))
+        return dataclasses.replace(out, output=output)
+
+    @staticmethod
+    def check_output(output: str, firmware) -> None:
+        """Refuse ``actuator`` where AUTOPILOT_VERSION says the firmware does not take it (unknown: flown)."""
+        if output == "actuator" and firmware is not None and firmware.takes_actuator_targets() is False:
+            raise PreflightRefused(f"{firmware.describe()} does not take SET_ACTUATOR_CONTROL_TARGET (its "
+                                   "AUTOPILOT_VERSION lacks MAV_PROTOCOL_CAPABILITY_SET_ACTUATOR_TARGET; ArduCopter "
+                                   "has no handler for it): fly --output attitude or rates")
+
+    @staticmethod
+    def _guided_timeout(params) -> None:
+        """GUID_TIMEOUT down to :data:`GUID_TIMEOUT_S` (never up)."""
+        old = _optional(params, "GUID_TIMEOUT")
+        if old is None:
+            params.event("warning", "GUID_TIMEOUT not readable: a stalled link may leave the last setpoint acting")
+        elif old > GUID_TIMEOUT_S + 1e-6:
+            new = params.set("GUID_TIMEOUT", GUID_TIMEOUT_S, old)
+            if abs(new - GUID_TIMEOUT_S) > 1e-6:
+                raise PreflightRefused(f"the vehicle did not accept GUID_TIMEOUT = {GUID_TIMEOUT_S:g} s")
+            params.said(f"GUID_TIMEOUT {old:g} -> {GUID_TIMEOUT_S:g} s (a stalled link levels the vehicle)")
+
+    @staticmethod
+    def _gcs_failsafe(params) -> None:
+        """FS_GCS_ENABLE = Land and FS_GCS_TIMEOUT, once the vehicle is known to listen to our heartbeats."""
+        ours = params.link.source_system
+        gcs_id = _optional(params, "MAV_GCS_SYSID")
+        if gcs_id is None:
+            gcs_id = _optional(params, "SYSID_MYGCS")  # before ArduPilot 4.7
+        if gcs_id is not None and int(gcs_id) != ours:
+            params.event("warning", f"MAV_GCS_SYSID is {int(gcs_id)}, not us ({ours}): the GCS failsafe would follow "
+                                    "that ground station's heartbeats, not ours; FS_GCS_ENABLE left as it is")
+            return
+        enable = _optional(params, "FS_GCS_ENABLE")
+        if enable is None:
+            params.event("warning", "FS_GCS_ENABLE not readable: a dead ground station is not landed by the vehicle")
+            return
+        if int(enable) != FS_GCS_LAND:
+            new = params.set("FS_GCS_ENABLE", float(FS_GCS_LAND), enable)
+            if int(new) != FS_GCS_LAND:
+                raise PreflightRefused(f"the vehicle did not accept FS_GCS_ENABLE = {FS_GCS_LAND} (Land)")
+            params.said(f"FS_GCS_ENABLE {int(enable)} -> {FS_GCS_LAND} (no heartbeat from us: land)")
+        timeout = _optional(params, "FS_GCS_TIMEOUT")
+        if timeout is not None and timeout > FS_GCS_TIMEOUT_S + 1e-6:
+            new = params.set("FS_GCS_TIMEOUT", FS_GCS_TIMEOUT_S, timeout)
+            if abs(new - FS_GCS_TIMEOUT_S) > 1e-6:
+                raise PreflightRefused(f"the vehicle did not accept FS_GCS_TIMEOUT = {FS_GCS_TIMEOUT_S:g} s")
+            params.said(f"FS_GCS_TIMEOUT {timeout:g} -> {FS_GCS_TIMEOUT_S:g} s")
 
     def control_lost(self, status) -> str | None:
         """Why the vehicle no longer takes our setpoints, or None."""
@@ -96,6 +257,16 @@ class ArduPilotProfile:
         if status.custom_mode not in self.control_modes:
             return f"mode {self.mode_name(status.custom_mode)}"
         return None
+
+    @staticmethod
+    def spool_up_s(params, firmware) -> float:
+        """Seconds from "armed" until the motors deliver the commanded thrust: ArduCopter's fixed
+        2 s arming delay (ARMING_DELAY_SEC in ArduCopter/motors.cpp) plus MOT_SPOOL_TIME; 0 for
+        the built-in SITL, which applies thrust at once."""
+        if firmware is not None and firmware.builtin_sitl:
+            return 0.0
+        spool = params.get("MOT_SPOOL_TIME", 0.5)
+        return 2.0 + (spool if spool is not None and 0.0 <= spool <= 2.0 else 0.5)
 
     @staticmethod
     def arming_refusal(statustexts, result: int) -> str:

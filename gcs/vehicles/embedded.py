@@ -14,7 +14,7 @@ import signal
 import subprocess
 import sys
 import tempfile
-from typing import Sequence
+from collections.abc import Sequence
 
 from gcs.link.mavlink import LinkError as GcsError  # a dead simulator is a link failure (exit 6)
 
@@ -45,7 +45,7 @@ class EmbeddedSitl:
     def _spawn(self, stdout) -> None:
         """Start the child; its stderr goes to a temporary file (a pipe nobody reads could fill and
         block it), read once when it exits."""
-        self._stderr = tempfile.TemporaryFile()
+        self._stderr = tempfile.TemporaryFile()  # noqa: SIM115  read after the child exits, long after this call
         try:
             # Its own process group: a Ctrl-C at the terminal reaches the ground station only,
             # which lands the vehicle before stopping the simulator.
@@ -54,7 +54,7 @@ class EmbeddedSitl:
         except OSError as exc:
             raise GcsError(f"cannot start {self.name}: {exc}") from None
 
-    def start(self) -> "EmbeddedSitl":
+    def start(self) -> EmbeddedSitl:
         self._spawn(subprocess.DEVNULL)
         return self
 
@@ -90,7 +90,7 @@ class EmbeddedSitl:
             self._stderr.close()
             self._stderr = None
 
-    def __enter__(self) -> "EmbeddedSitl":
+    def __enter__(self) -> EmbeddedSitl:
         return self.start()
 
     def __exit__(self, *exc) -> None:
@@ -124,7 +124,7 @@ class EmbeddedRig(EmbeddedSitl):
         self.device: str | None = None
         self.start_timeout_s = start_timeout_s
 
-    def start(self) -> "EmbeddedRig":
+    def start(self) -> EmbeddedRig:
         self._spawn(subprocess.PIPE)
         sel = selectors.DefaultSelector()
         sel.register(self.proc.stdout, selectors.EVENT_READ)  # type: ignore[arg-type]

@@ -14,7 +14,7 @@ estimator (:mod:`gcs.flight.validate`), every outgoing message passes the output
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
@@ -22,15 +22,17 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from gcs.config import Config
 from gcs.control import model_params
 from gcs.errors import PreflightRefused
-from gcs.estimate import StateEstimator
-from gcs.flight.clock import VehicleClock, wait_until
+from gcs.estimate import DisturbanceObserver, StateEstimator
+from gcs.flight.clock import PacedVehicleClock, VehicleClock, wait_until
 from gcs.flight.context import FlightContext
 from gcs.link.guard import GuardLimits, OutputGuard, UnsafeCommand
 from gcs.link.mavlink import LinkError, MavlinkLink
 from gcs.vehicles.ardupilot import ArduPilotProfile
-from gcs.vehicles.output import OutputAdapter, OutputModel
+from gcs.vehicles.firmware import Firmware
+from gcs.vehicles.linkio import LinkIO
+from gcs.vehicles.output import OutputAdapter, build_adapter
 from gcs.vehicles.mavlink_preflight import MavlinkPreflight
-from gcs.vehicles.params import VehicleParams
+from gcs.vehicles.params import ParamJournal, VehicleParams
 from gcs.vehicles.streams import StreamMonitor
 from gcs.vehicles.telemetry import Telemetry
 from quadrotor.state import Command, State
@@ -41,7 +43,8 @@ __all__ = ["MavlinkSession", "MAX_BODY_RATE_RAD_S", "MIN_RATE_FRACTION"]
 MAX_BODY_RATE_RAD_S = 35.0
 #: The loop fails safe when a stream the controller flies on stays below this share of its requested rate.
 MIN_RATE_FRACTION = 0.25
-STREAM_IDS = {"ATTITUDE": mavlink.MAVLINK_MSG_ID_ATTITUDE, "LOCAL_POSITION_NED": mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED}
+STREAM_IDS = {"ATTITUDE": mavlink.MAVLINK_MSG_ID_ATTITUDE,
+              "LOCAL_POSITION_NED": mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED}
 
 
 class MavlinkSession:
@@ -57,12 +60,23 @@ class MavlinkSession:
         Setpoint message (default: the config's ``[flight] output``).
     vehicle_alive : callable () -> str or None
         Why the vehicle's process is gone (a child simulator that exited), or None.
+    speedup : float or None
+        The vehicle runs by itself this many times faster than the wall (a firmware SITL): the
+        flight runs on its clock (:class:`~gcs.flight.clock.PacedVehicleClock`).  None: the
+        flight's clock is given (real time), or lockstep.
+    ready_timeout_s : float
+        Vehicle seconds to wait for it to become ready (fresh telemetry, EKF) and to accept arming.
+    boot_speedup : float or None
+        A firmware SITL we started runs at this speed-up until it is ready, then at ``speedup``
+        (its SIM_SPEEDUP parameter).
     """
 
     lands_itself = True
 
     def __init__(self, config: Config, link: MavlinkLink, *, profile: ArduPilotProfile | None = None,
-                 output: str | None = None, vehicle_alive: Callable[[], str | None] | None = None) -> None:
+                 output: str | None = None, vehicle_alive: Callable[[], str | None] | None = None,
+                 speedup: float | None = None, ready_timeout_s: float = 60.0,
+                 boot_speedup: float | None = None) -> None:
         fc = config.flight
         self.config = config
         self.link = link
@@ -70,6 +84,11 @@ class MavlinkSession:
         self.control_name = self.profile.control_name
         self.output_kind = output or fc.output
         self.vehicle_alive = vehicle_alive
+        self.speedup = speedup
+        self.boot_speedup = boot_speedup
+        self.ready_timeout_s = ready_timeout_s
+        #: What the autopilot says it is (the preflight asks for AUTOPILOT_VERSION).
+        self.firmware = Firmware(mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA)
         self.model = model_params(config)
         self.period_s = config.experiment.ts_s
         self.estimator = StateEstimator(config.experiment.ts_s, self.model, (fc.position_std_m,) * 3,
@@ -80,25 +99,32 @@ class MavlinkSession:
         self.guard = OutputGuard(GuardLimits(max_body_rate_rad_s=MAX_BODY_RATE_RAD_S))
         link.guard = self.guard
         rate = fc.telemetry_rate_hz
-        self.streams = StreamMonitor({"ATTITUDE": rate, "LOCAL_POSITION_NED": rate}, min_rate_hz=MIN_RATE_FRACTION * rate)
+        self.streams = StreamMonitor({"ATTITUDE": rate, "LOCAL_POSITION_NED": rate},
+                                     min_rate_hz=MIN_RATE_FRACTION * rate)
         self.adapter: OutputAdapter | None = None
         self.params: VehicleParams | None = None
         self.ctx: FlightContext | None = None
-        self._fault: tuple[str, str] | None = None
-        self._link_down = False
+        self.io = LinkIO(link, self.handle, self.event, self._safe_command)
         self.armed_sent = False
+        #: The preflight found the vehicle ready (its streams flowing): from then on they are watched.
+        self.ready = False
         self._gone_checked = 0
 
     # ------------------------------------------------------------------ wiring and I/O
     def attach(self, ctx: FlightContext) -> None:
         self.ctx = ctx
         if ctx.clock is None:
-            ctx.clock = VehicleClock(lambda: self.telemetry.status.time_boot_ms * 1_000_000, self._pump_wait)
+            vehicle_ns = self.telemetry.vehicle_time_ns
+            ctx.clock = (VehicleClock(vehicle_ns, self.io.pump_wait) if self.speedup is None
+                         else PacedVehicleClock(vehicle_ns, self.io.pump_wait, self.boot_speedup or self.speedup))
+            self.telemetry.on_vehicle_clock = True
         if ctx.recorder.enabled:
             rec = ctx.recorder
             self.link.on_frame = lambda direction, msg, accepted=True: rec.mavlink(ctx.now_ns(), direction, msg,
                                                                                    accepted)
-        self.params = VehicleParams(self.link, self.handle, self.event, self.check_interrupt)
+        # A child simulator is new each flight: nothing of an earlier one to recover.
+        journal = None if self.vehicle_alive is not None else ParamJournal(f"{self.link.url}#{self.link.target_system}")
+        self.params = VehicleParams(self.link, self.handle, self.event, self.check_interrupt, journal)
 
     def event(self, kind: str, text: str) -> None:
         self.ctx.event(kind, text)  # type: ignore[union-attr]
@@ -108,44 +134,11 @@ class MavlinkSession:
 
     def pump(self) -> int:
         """Drain the link into the telemetry (never blocks); the number of messages."""
-        try:
-            msgs = self.link.drain()
-        except LinkError as exc:
-            self._link_failed(exc)
-            return 0
-        for m in msgs:
-            self.handle(m)
-        return len(msgs)
-
-    def _pump_wait(self, wait_s: float) -> None:
-        if self.pump() == 0:
-            self.link.wait_readable(wait_s)
-
-    def _link_failed(self, exc: Exception) -> None:
-        """A dead link shows as stale telemetry (the failsafe acts); said once."""
-        if not self._link_down:
-            self._link_down = True
-            self.event("warning", f"link failure: {exc}")
+        return self.io.pump()
 
     def send_message(self, msg) -> None:
-        try:
-            self.link.send(msg)
-        except UnsafeCommand as exc:
-            self._unsafe(str(exc))
-        except LinkError as exc:
-            self._link_failed(exc)
-
-    def _unsafe(self, why: str) -> None:
-        """A command was blocked before the wire: send the safe one instead, and fail safe (once)."""
-        first = self._fault is None
-        if first:
-            self._fault = ("unsafe_command", "")
-            self.event("failsafe", f"output guard blocked a command ({why}): safe level command, landing")
-        try:
-            self.link.send(self._safe_command())
-        except (UnsafeCommand, LinkError) as exc:
-            if first:
-                self.event("warning", f"the safe command could not be sent either: {exc}")
+        """Send ``msg`` through the output guard (a blocked one: the safe command, and fail safe)."""
+        self.io.send(msg)
 
     def _safe_command(self):
         """Level, yaw held, 90 % of hover thrust (zero thrust before the adapter exists: on the ground)."""
@@ -167,26 +160,29 @@ class MavlinkSession:
     def wait(self, predicate: Callable[[], bool], timeout_s: float, *, thrust_n: float | None = 0.0,
               until_interrupt: bool = True) -> bool:
         """Until ``predicate`` or ``timeout_s`` of the flight's clock: level setpoints at ``thrust_n`` every
-        period (None: only listen — heartbeats once a second, and in lockstep a THROTTLE_IGNORE target that
-        the autopilot refuses but that moves the simulator's time)."""
+        period (None: only listen — and in lockstep a THROTTLE_IGNORE target that the autopilot refuses but
+        that moves the simulator's time); a HEARTBEAT every half second either way."""
         ctx = self.ctx
         next_hb = [ctx.now_ns()]
 
         def pump() -> None:
             self.pump()
+            if ctx.now_ns() >= next_hb[0]:
+                # Twice a second of the flight's clock whatever is sent: an autopilot's GCS failsafe
+                # (ArduCopter FS_GCS_*, on its own clock) must see us while we wait.
+                next_hb[0] = ctx.now_ns() + 500_000_000
+                self.io.quietly(self.link.send_heartbeat)
             why = self._vehicle_gone(force=True)
             if why is not None:
                 raise LinkError(why)
-            if self.adapter is not None:
+            if self.adapter is not None and self.ready:
                 self._watch_streams(ctx.now_ns())  # streams clobbered while landing are asked for again too
 
         def step() -> bool:
             if thrust_n is not None and self.adapter is not None:
-                self.send_message(self.adapter.level(self.estimator.state(), thrust_n, self.telemetry.status.time_boot_ms))
+                self.send_message(self.adapter.level(self.estimator.state(), thrust_n,
+                                                     self.telemetry.status.time_boot_ms))
                 return True
-            if ctx.now_ns() >= next_hb[0]:
-                next_hb[0] += 1_000_000_000
-                self._send_quietly(self.link.send_heartbeat)
             if ctx.lockstep and self.adapter is not None:
                 self.send_message(self._target(64 | 7, (1.0, 0.0, 0.0, 0.0), 0.0))
                 return True
@@ -196,12 +192,6 @@ class MavlinkSession:
             return until_interrupt and ctx.interrupts.count > 0 and not self.telemetry.status.armed
 
         return wait_until(ctx.clock, predicate, timeout_s, period_s=self.period_s, pump=pump, step=step, stop=stop)
-
-    def _send_quietly(self, send: Callable[[], object]) -> None:
-        try:
-            send()
-        except LinkError as exc:
-            self._link_failed(exc)
 
     def _vehicle_gone(self, force: bool = False) -> str | None:
         if self.vehicle_alive is None:
@@ -220,7 +210,7 @@ class MavlinkSession:
             if self.streams.rerequests <= 3 or self.streams.rerequests % 20 == 0:
                 self.event("warning", f"{name} at {got:.1f} Hz instead of {rate:g} Hz (another ground station's "
                                        f"stream request?): asking for {rate:g} Hz again")
-            self._send_quietly(lambda name=name, rate=rate: self.link.send_message_interval(STREAM_IDS[name], rate))
+            self.io.quietly(lambda name=name, rate=rate: self.link.send_message_interval(STREAM_IDS[name], rate))
         return verdict.failure
 
     # ------------------------------------------------------------------ preflight
@@ -229,15 +219,33 @@ class MavlinkSession:
         MavlinkPreflight(self).run()
 
     def configure_output(self, out) -> None:
-        """The output adapter, once the profile has read the hover throttle and the angle gains."""
-        fc, link = self.config.flight, self.link
-        self.adapter = OutputAdapter(OutputModel(
-            kind=self.output_kind, mass_kg=self.model.mass_kg, gravity_m_s2=self.model.gravity_m_s2,
-            hover_throttle=out.hover_throttle, inertia_kg_m2=fc.inertia_kg_m2, max_torque_nm=fc.max_torque_nm,
-            rate_gain_1_s=fc.rate_gain_1_s, angle_gain_1_s=out.angle_gain_1_s, ts_s=self.period_s),
-            link.mav, link.target_system, link.target_component)
+        """The output adapter, once the profile has read what it needs (``out``: its
+        :class:`~gcs.vehicles.ardupilot.OutputParams`), and the disturbance observer.
+
+        The output's own parameters are set here when the profile was not told the output
+        (``out.output``); ``actuator`` on a firmware that does not take it is refused.  The
+        observer runs per ``[estimator] disturbance``: "on", or "auto" on a firmware that is
+        not the built-in SITL (whose thrust and drag are the model's).
+        """
+        if out.output != self.output_kind:
+            out = self.profile.configure_output(self.params, self.output_kind, self.firmware, out)
+        link = self.link
+        self.adapter = build_adapter(self.output_kind, self.model, self.config.flight, out, self.period_s, link.mav,
+                                     link.target_system, link.target_component)
+        est = self.config.estimator
+        observe = est.disturbance == "on" or (est.disturbance == "auto" and not self.firmware.builtin_sitl)
+        tau = est.disturbance_time_constant_s
+        self.estimator.disturbance = (DisturbanceObserver(tau, velocity_bias_time_constant_s=tau,
+                                                          drag_1_s=self.config.vehicle.drag_n_per_m_s
+                                                          / self.config.vehicle.mass_kg) if observe else None)
         self.event("output", f"{self.output_kind}: hover throttle {out.hover_throttle:.3f}, "
-                             f"angle gains {out.angle_gain_1_s}")
+                             f"angle gains {out.angle_gain_1_s}, rate demand gains {self.config.flight.rate_gain_1_s}; "
+                             + (f"disturbance observer on (tau {tau:g} s)" if observe
+                                else "no disturbance observer"))
+
+    def disturbance_m_s2(self) -> tuple[float, float, float]:
+        """The acceleration eq. 1 misses, as the estimator's observer has it (zeros without one)."""
+        return self.estimator.disturbance_m_s2()
 
     def disarm_on_ground(self) -> None:
         """After a preflight refusal that came after the arm command: disarm (the vehicle is on the ground).
@@ -272,7 +280,7 @@ class MavlinkSession:
         gone = self._vehicle_gone()
         if gone is not None:
             return ("link_error", gone)
-        return self._fault
+        return self.io.fault
 
     def health(self, now_ns: int) -> tuple[str, str] | None:
         failure = self._watch_streams(now_ns)
@@ -289,8 +297,8 @@ class MavlinkSession:
         self.send_message(self.adapter.encode(fields, self.telemetry.status.time_boot_ms))  # type: ignore[union-attr]
 
     def housekeeping(self) -> None:
-        self._send_quietly(self.link.send_heartbeat)
-        self._send_quietly(lambda: self.telemetry.timesync_sent.add(self.link.send_timesync()))
+        self.io.quietly(self.link.send_heartbeat)
+        self.io.quietly(lambda: self.telemetry.timesync_sent.add(self.link.send_timesync()))
 
     def landed(self) -> bool:
         return not self.telemetry.status.armed
@@ -368,4 +376,4 @@ class MavlinkSession:
 
     def loop_summary(self) -> dict:
         clock = self.ctx.clock if self.ctx is not None else None
-        return {"telemetry_timeouts": clock.timeouts} if isinstance(clock, VehicleClock) else {}
+        return {"telemetry_timeouts": clock.timeouts} if isinstance(clock, VehicleClock | PacedVehicleClock) else {}

@@ -1,10 +1,15 @@
 """The preflight of a MAVLink vehicle session, step by step (each a refusal with its reason, exit 7).
 
-HEARTBEAT (refused if already armed) -> TIMESYNC round trip (refused if longer than the
-stale timeout) -> streams requested -> the autopilot profile's parameters and the output
-adapter -> fresh telemetry -> battery -> the profile's flight mode, confirmed by HEARTBEAT
-(never arm in a mode the vehicle did not report) -> 0.5 s of level idle setpoints -> arm,
-confirmed by HEARTBEAT.
+HEARTBEAT (refused if already armed) -> AUTOPILOT_VERSION (what the firmware is and takes) ->
+TIMESYNC round trip (refused if longer than the stale timeout) -> streams requested ->
+parameters an earlier flight left changed put back -> the autopilot profile's parameters and
+the output adapter -> the vehicle ready: fresh ATTITUDE and LOCAL_POSITION_NED (a firmware
+whose EKF is still aligning is waited for up to the ready timeout, its progress said every
+5 s) -> battery -> the profile's flight mode, confirmed by HEARTBEAT (never arm in a mode the
+vehicle did not report) -> 0.5 s of level idle setpoints -> arm, confirmed by HEARTBEAT
+(refusals with a "PreArm:"/"Arm:" reason tried again every second until the ready timeout) ->
+the profile's spool-up (ArduCopter: 2 s arming delay + MOT_SPOOL_TIME) at low thrust, so the
+mission starts when the motors deliver what it commands.
 """
 
 from __future__ import annotations
@@ -12,8 +17,21 @@ from __future__ import annotations
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.errors import PreflightRefused
+from gcs.link.mavlink import LinkError
+from gcs.vehicles.firmware import Firmware
 
-__all__ = ["MavlinkPreflight"]
+__all__ = ["MavlinkPreflight", "PROGRESS_PERIOD_S", "ARM_RETRY_S"]
+
+#: Vehicle seconds between two progress lines while waiting for the vehicle.
+PROGRESS_PERIOD_S = 5.0
+#: Vehicle seconds between two arming attempts the vehicle refused (still initialising).
+ARM_RETRY_S = 1.0
+#: Share of hover thrust sent while the motors spool up on the ground.
+SPOOL_THRUST_SHARE = 0.25
+#: MAV_RESULTs of an arming refusal worth trying again (TEMPORARILY_REJECTED, FAILED: pre-arm checks).
+_RETRY_RESULTS = (mavlink.MAV_RESULT_TEMPORARILY_REJECTED, mavlink.MAV_RESULT_FAILED)
+#: EKF_STATUS_REPORT flags: attitude, horizontal position (relative).
+_EKF_ATTITUDE, _EKF_POS_HORIZ_REL = 1, 8
 
 
 class MavlinkPreflight:
@@ -36,18 +54,90 @@ class MavlinkPreflight:
         if st.armed:
             raise PreflightRefused(f"the vehicle is already armed (mode {st.mode}); gcs fly starts from a "
                                    "disarmed vehicle on the ground")
+        self._identify(hb)
         self._timesync(fc.telemetry_stale_s)
         self._request_streams(fc.telemetry_rate_hz)
-        self.s.configure_output(self.profile.configure(self.s.params))
-        if not self.s.wait(lambda: self.telemetry.fresh(self.s.ctx.now_ns(), fc.telemetry_stale_s)
-                          and self.s.estimator.initialised, 5.0):
-            raise PreflightRefused("no fresh ATTITUDE and LOCAL_POSITION_NED telemetry within 5 s")
+        self.s.params.recover()
+        self.s.configure_output(self.profile.configure(self.s.params, self.s.firmware, self.s.output_kind))
+        deadline_ns = self.s.ctx.now_ns() + int(self.s.ready_timeout_s * 1e9)
+        self._wait_ready(deadline_ns)
         self._check_battery(fc.min_battery_v)
         self._enter_flight_mode()
         # Stream setpoints before arming (0.5 s of idle, level).
         steps = int(round(0.5 / self.s.period_s))
         self.s.wait(lambda: False, steps * self.s.period_s - 1e-9, thrust_n=0.0, until_interrupt=False)
-        self._arm()
+        self._arm(max(deadline_ns, self.s.ctx.now_ns() + int(5e9)))
+        self._spool_up()
+
+    def _identify(self, hb) -> None:
+        """AUTOPILOT_VERSION (MAV_CMD_REQUEST_MESSAGE 148): the firmware, its version and capabilities."""
+        tm = self.telemetry
+        try:
+            self.link.command_long(mavlink.MAV_CMD_REQUEST_MESSAGE, [mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION],
+                                   timeout_s=1.0, retries=1, on_message=self.s.handle)
+            if tm.autopilot_version is None:
+                self.link.wait(lambda m: tm.autopilot_version is not None, 1.0, self.s.handle)
+        except LinkError:
+            pass  # an autopilot that does not answer: nothing known of its capabilities
+        fw = Firmware.from_messages(hb.autopilot, tm.autopilot_version)
+        self.s.firmware = fw
+        caps = "capabilities unknown" if fw.capabilities is None else f"capabilities 0x{fw.capabilities:x}"
+        self.s.event("link", f"firmware {fw.describe()} ({caps})")
+
+    def _wait_ready(self, deadline_ns: int) -> None:
+        """Fresh ATTITUDE and LOCAL_POSITION_NED, the estimator initialised; progress every 5 s of vehicle time."""
+        st, ctx, stale_s = self.telemetry.status, self.s.ctx, self.config.flight.telemetry_stale_s
+        t0 = ctx.now_ns()
+        next_say = [t0 + int(PROGRESS_PERIOD_S * 1e9)]
+
+        def ready() -> bool:
+            ok = self.telemetry.fresh(ctx.now_ns(), stale_s) and self.s.estimator.initialised
+            if not ok and ctx.now_ns() >= next_say[0]:
+                next_say[0] += int(PROGRESS_PERIOD_S * 1e9)
+                self.s.event("preflight", f"waiting for the vehicle ({(ctx.now_ns() - t0) / 1e9:.0f} s of "
+                                          f"{self.s.ready_timeout_s:g} s): {self._not_ready()}")
+            return ok
+
+        if not self.s.wait(ready, max(0.0, (deadline_ns - t0) / 1e9)):
+            self.s.check_interrupt()
+            raise PreflightRefused(f"the vehicle is not ready after {self.s.ready_timeout_s:g} s "
+                                   f"(--ready-timeout): {self._not_ready()}")
+        self.s.ready = True
+        self._leave_boot_speed()
+        if ctx.now_ns() - t0 > 1e9:
+            self.s.event("preflight", f"vehicle ready after {(ctx.now_ns() - t0) / 1e9:.1f} s"
+                                      + (f" (EKF flags 0x{st.ekf_flags:04x})" if st.ekf_flags is not None else ""))
+
+    def _leave_boot_speed(self) -> None:
+        """A firmware SITL we started booted faster than it flies: SIM_SPEEDUP to the flight's speed-up."""
+        boot, flight = self.s.boot_speedup, self.s.speedup
+        if boot is None or flight is None or boot == flight:
+            return
+        held = self.link.param_set("SIM_SPEEDUP", flight, on_message=self.s.handle)
+        if held != flight:
+            raise PreflightRefused(f"the SITL did not take SIM_SPEEDUP = {flight:g} (holds {held:g})")
+        clock = self.s.ctx.clock
+        if hasattr(clock, "speedup"):
+            clock.speedup = flight
+        self.s.event("preflight", f"booted at speed-up {boot:g}, flying at {flight:g} (SIM_SPEEDUP)")
+
+    def _not_ready(self) -> str:
+        """What is missing, in words."""
+        now, stale_s, st = self.s.ctx.now_ns(), self.config.flight.telemetry_stale_s, self.telemetry.status
+        missing = [f"{name} {'never received' if age == float('inf') else f'{age:.1f} s old'}"
+                   for name in ("ATTITUDE", "LOCAL_POSITION_NED")
+                   if (age := self.telemetry.age_s(name, now)) > stale_s]
+        if not missing and not self.s.estimator.initialised:
+            missing.append("state estimate not initialised")
+        if st.ekf_flags is not None:
+            f = st.ekf_flags
+            ekf = "no attitude" if not f & _EKF_ATTITUDE else (
+                "no horizontal position yet" if not f & _EKF_POS_HORIZ_REL else "position ok")
+            missing.append(f"EKF flags 0x{f:04x} ({ekf})")
+        texts = [t for t in st.statustext if "EKF" in t or "GPS" in t or "PreArm" in t]
+        if texts:
+            missing.append(f"last said: {texts[-1]!r}")
+        return "; ".join(missing) or "waiting"
 
     def _timesync(self, stale_s: float) -> None:
         self.telemetry.timesync_sent.add(self.link.send_timesync())
@@ -70,6 +160,8 @@ class MavlinkPreflight:
             res = self.link.set_message_interval(mid, hz, on_message=self.s.handle)
             if res != mavlink.MAV_RESULT_ACCEPTED:
                 self.s.event("warning", f"stream {mid} at {hz:g} Hz not accepted (MAV_RESULT {res})")
+        # For the readiness report only (not every autopilot has it): not waited for.
+        self.s.io.quietly(lambda: self.link.send_message_interval(mavlink.MAVLINK_MSG_ID_EKF_STATUS_REPORT, 1.0))
 
     def _check_battery(self, min_v: float) -> None:
         st = self.telemetry.status
@@ -92,13 +184,37 @@ class MavlinkPreflight:
             # A mode is trusted only once the vehicle reports it: never arm in another one.
             raise PreflightRefused(f"mode {name} acknowledged but not confirmed: the vehicle reports {st.mode}")
 
-    def _arm(self) -> None:
-        self.s.check_interrupt()
-        self.s.armed_sent = True
-        res = self.link.arm(True, on_message=self.s.handle)
-        if res != mavlink.MAV_RESULT_ACCEPTED:
+    def _arm(self, deadline_ns: int) -> None:
+        """Arm; a refusal of a vehicle still initialising is tried again every second until ``deadline_ns``."""
+        ctx, st = self.s.ctx, self.telemetry.status
+        said = None
+        while True:
+            self.s.check_interrupt()
+            self.s.armed_sent = True
+            st.statustext.clear()
+            res = self.link.arm(True, on_message=self.s.handle)
+            if res == mavlink.MAV_RESULT_ACCEPTED:
+                break
             # The reason comes as STATUSTEXT, before or just after the acknowledgement.
             self.link.wait(lambda m: m.get_type() == "STATUSTEXT", 0.5, self.s.handle)
-            raise PreflightRefused(f"arming refused: {self.profile.arming_refusal(self.telemetry.status.statustext, res)}")
-        if not self.s.wait(lambda: self.telemetry.status.armed, 3.0):
+            why = self.profile.arming_refusal(st.statustext, res)
+            if res not in _RETRY_RESULTS or ctx.now_ns() + int(ARM_RETRY_S * 1e9) > deadline_ns:
+                raise PreflightRefused(f"arming refused: {why}" + ("" if res not in _RETRY_RESULTS else
+                                       f" (still refused at the ready timeout, {self.s.ready_timeout_s:g} s)"))
+            if why != said:
+                said = why
+                self.s.event("preflight", f"arming refused for now ({why}); trying again every {ARM_RETRY_S:g} s")
+            self.s.wait(lambda: False, ARM_RETRY_S, thrust_n=0.0)
+        if not self.s.wait(lambda: st.armed, 3.0):
             raise PreflightRefused("the vehicle acknowledged arming but does not report armed")
+
+    def _spool_up(self) -> None:
+        """Low thrust, level, until the motors deliver the commanded thrust (the profile says how long)."""
+        spool_s = self.profile.spool_up_s(self.s.params, self.s.firmware)
+        if spool_s <= 0:
+            return
+        self.s.event("arming", f"motors spooling up: {spool_s:.1f} s before the mission starts")
+        thrust = SPOOL_THRUST_SHARE * self.s.model.hover_thrust_n
+        self.s.wait(lambda: not self.telemetry.status.armed, spool_s, thrust_n=thrust, until_interrupt=False)
+        if not self.telemetry.status.armed:
+            raise PreflightRefused("the vehicle disarmed while its motors spooled up")

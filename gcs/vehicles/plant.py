@@ -85,6 +85,10 @@ class PlantSession:
     def truth(self) -> State:
         return self.state
 
+    def disturbance_m_s2(self) -> tuple[float, float, float]:
+        """None estimated: the simulation flies the paper's laws as they are."""
+        return _CALM
+
     def fresh(self, now_ns: int, stale_s: float) -> bool:
         return True
 

@@ -26,7 +26,7 @@ autopilot (:class:`gcs.flight.loop.MissionLoop`); what differs is the vehicle:
 from __future__ import annotations
 
 import math
-from typing import Callable
+from collections.abc import Callable
 
 from gcs.config import Config
 from gcs.control import model_params
@@ -35,9 +35,10 @@ from gcs.estimate import StateEstimator
 from gcs.flight.clock import VehicleClock, wait_until
 from gcs.flight.context import FlightContext
 from gcs.flight.safety import SafetyEnvelope
-from gcs.link.guard import GuardLimits, OutputGuard, UnsafeCommand
+from gcs.link.guard import GuardLimits, OutputGuard
 from gcs.link.mavlink import LinkError
 from gcs.link.rig import RigLink
+from gcs.vehicles.linkio import LinkIO
 from gcs.vehicles.rig_telemetry import RigTelemetry, cutoff_causes
 from quadrotor import rig_protocol as rp
 from quadrotor.rig_protocol import AckResult, RigFlags, RigState
@@ -84,15 +85,14 @@ class RigSession:
         link.guard = self.guard
         self.ctx: FlightContext | None = None
         self._seq = 0
-        self._fault: tuple[str, str] | None = None
-        self._link_down = False
+        self.io = LinkIO(link, self._handle, self._event, self._safe_command)
         self._armed_sent = False
         self._gone_checked = 0
 
     def attach(self, ctx: FlightContext) -> None:
         self.ctx = ctx
         if ctx.clock is None:
-            ctx.clock = VehicleClock(lambda: self.tel.time_ns, self._pump_wait)
+            ctx.clock = VehicleClock(lambda: self.tel.time_ns, self.io.pump_wait)
         if ctx.recorder.enabled:
             rec = ctx.recorder
             self.link.on_bytes = lambda direction, data: rec.frame(ctx.now_ns(), "rig", direction, data)
@@ -107,39 +107,10 @@ class RigSession:
     # ------------------------------------------------------------------ I/O
     def pump(self) -> int:
         """Drain the serial line into the estimate (never blocks); the number of messages."""
-        try:
-            msgs = self.link.drain()
-        except LinkError as exc:
-            self._link_failed(exc)
-            return 0
-        for m in msgs:
-            self._handle(m)
-        return len(msgs)
-
-    def _pump_wait(self, wait_s: float) -> None:
-        if self.pump() == 0:
-            self.link.wait_readable(wait_s)
-
-    def _link_failed(self, exc: Exception) -> None:
-        if not self._link_down:
-            self._link_down = True
-            self._event("warning", f"link failure: {exc}")
+        return self.io.pump()
 
     def _send(self, msg) -> None:
-        try:
-            self.link.send(msg)
-        except UnsafeCommand as exc:
-            first = self._fault is None
-            if first:
-                self._fault = ("unsafe_command", "")
-                self._event("failsafe", f"output guard blocked a command ({exc}): safe level command, landing")
-            try:
-                self.link.send(self._safe_command())
-            except (UnsafeCommand, LinkError) as exc2:
-                if first:
-                    self._event("warning", f"the safe command could not be sent either: {exc2}")
-        except LinkError as exc:
-            self._link_failed(exc)
+        self.io.send(msg)
 
     def _heartbeat(self) -> None:
         self._send(rp.Heartbeat(self.tel.heartbeat_stamp()))
@@ -149,8 +120,9 @@ class RigSession:
         for _ in range(retries + 1):
             seq = self.link.next_seq8()
             self._send(msg_type(seq))
-            ack = self.link.wait(lambda m: isinstance(m, rp.Ack) and m.acked_type == msg_type.TYPE and m.seq == seq,
-                                 timeout_s, self._handle)
+            ack = self.link.wait(
+                lambda m, seq=seq: isinstance(m, rp.Ack) and m.acked_type == msg_type.TYPE and m.seq == seq,
+                timeout_s, self._handle)
             if ack is not None:
                 return AckResult(ack.result)
         raise LinkError(f"no ACK for {what} after {retries + 1} tries")
@@ -201,7 +173,8 @@ class RigSession:
         fc = self.config.flight
         status = self._greet()
         self._event("link", f"rig on {self.link.url}: protocol {status.protocol_version}, firmware "
-                            f"{status.fw_major}.{status.fw_minor}.{status.fw_patch}, state {RigState(status.state).name}")
+                            f"{status.fw_major}.{status.fw_minor}.{status.fw_patch}, "
+                            f"state {RigState(status.state).name}")
         if status.protocol_version != rp.PROTOCOL_VERSION:
             raise PreflightRefused(f"the rig speaks protocol version {status.protocol_version}, this ground station "
                                    f"{rp.PROTOCOL_VERSION}")
@@ -217,8 +190,8 @@ class RigSession:
             self._event("warning", f"a cut-off is latched ({cutoff_causes(self.tel.flags)}); clearing it with DISARM")
             self._command(rp.Disarm, "DISARM")
         elif self.tel.state_rig in (RigState.ARMED, RigState.DESCENT):
-            raise PreflightRefused(f"the rig is already {RigState(self.tel.state_rig).name.lower()}; gcs fly starts from "
-                                   "a disarmed rig on the ground")
+            raise PreflightRefused(f"the rig is already {RigState(self.tel.state_rig).name.lower()}; "
+                                   "gcs fly starts from a disarmed rig on the ground")
         self._settle(fc.telemetry_stale_s)
         if not self.tel.flags & RigFlags.LANDED:
             raise PreflightRefused(f"the rig is not resting on the ground (altitude {self.estimator.state().z:.2f} m)")
@@ -273,6 +246,10 @@ class RigSession:
     def truth(self) -> State | None:
         return None
 
+    def disturbance_m_s2(self) -> tuple[float, float, float]:
+        """None estimated: the rig flies the paper's laws as they are."""
+        return (0.0, 0.0, 0.0)
+
     def fresh(self, now_ns: int, stale_s: float) -> bool:
         return self.tel.fresh(now_ns, stale_s)
 
@@ -282,7 +259,7 @@ class RigSession:
             gone = self.vehicle_alive() if self._gone_checked % 10 == 1 else None
             if gone is not None:
                 return ("link_error", gone)
-        return self._fault
+        return self.io.fault
 
     def health(self, now_ns: int) -> tuple[str, str] | None:
         return None
@@ -371,7 +348,7 @@ class RigSession:
                 self._level(descend)
             else:  # no attitude to level on: hold the angular rates (no angular acceleration)
                 self._control_frame(descend, 0.0, 0.0, 0.0)
-            self._pump_wait(0.002)
+            self.io.pump_wait(0.002)
         self._disarm_landed()
 
     def abandon(self) -> None:

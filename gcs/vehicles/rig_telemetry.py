@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from gcs.estimate import StateEstimator
 from gcs.flight.validate import TelemetryValidator
@@ -90,7 +90,8 @@ class RigTelemetry:
             self._rig_time(msg.time_us)
             self.last_rx_ns = now_ns  # arrival on the loop's clock (in lockstep: >= the rig's time)
             self.estimator.correct_position((msg.x_m, 0.0, msg.altitude_m))
-            self.estimator.set_attitude(msg.roll_rad, msg.pitch_rad, 0.0, msg.roll_rate_rad_s, msg.pitch_rate_rad_s, 0.0)
+            self.estimator.set_attitude(msg.roll_rad, msg.pitch_rad, 0.0,
+                                        msg.roll_rate_rad_s, msg.pitch_rate_rad_s, 0.0)
             self.set_flags(RigFlags(msg.flags))
         elif isinstance(msg, rp.Status):
             self.status = msg

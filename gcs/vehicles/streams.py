@@ -12,7 +12,7 @@ failure once it has stayed below ``min_rate_hz`` for ``grace_s``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping
+from collections.abc import Mapping
 
 __all__ = ["StreamMonitor", "StreamVerdict"]
 

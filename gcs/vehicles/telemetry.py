@@ -2,8 +2,11 @@
 
 Conversions go through :mod:`quadrotor.frames` only: LOCAL_POSITION_NED becomes
 (x, y, z up) and (vx, vy, vz up); ATTITUDE's body rates become Euler-angle
-rates.  Freshness is kept per stream on the loop's clock, and the vehicle's
-own time (``time_boot_ms``) is tracked for lockstep.
+rates.  The vehicle's own time (``time_boot_ms``) is tracked: it is the clock of a
+lockstep or paced flight.  Freshness is kept per stream twice: by arrival on the loop's clock,
+and by the sample's own time stamp on the vehicle's clock (:class:`VehicleTimeMap`), so that
+old samples delivered late (a link or a ground station that stalled, a radio that buffered)
+count as old.  EKF_STATUS_REPORT flags are kept for the readiness report.
 """
 
 from __future__ import annotations
@@ -11,7 +14,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Callable
+from collections.abc import Callable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -20,7 +23,38 @@ from gcs.flight.validate import TelemetryValidator
 from quadrotor.mavlink.modes import copter_mode_name
 from quadrotor.frames import body_rates_to_euler_rates, ned_to_paper_position, ned_to_paper_velocity
 
-__all__ = ["VehicleStatus", "Telemetry"]
+__all__ = ["VehicleStatus", "Telemetry", "VehicleTimeMap"]
+
+#: Upward drift allowed for the vehicle-to-loop clock offset (crystal drift; a restart of the floor) [s/s].
+OFFSET_DRIFT = 1e-4
+
+
+class VehicleTimeMap:
+    """Loop time <-> vehicle time: the smallest ``arrival - time stamp`` seen (the fastest delivery).
+
+    A sample delivered late has a larger difference and does not move the floor; the floor may
+    rise by :data:`OFFSET_DRIFT` per second (two clocks drift apart).  ``age_ns`` of a sample is
+    then how old it is on the vehicle's clock, whenever it arrived.
+    """
+
+    def __init__(self) -> None:
+        self.offset_ns: int | None = None
+        self._at_ns = 0
+
+    def observe(self, arrival_ns: int, stamp_ns: int) -> None:
+        d = arrival_ns - stamp_ns
+        if self.offset_ns is None:
+            self.offset_ns, self._at_ns = d, arrival_ns
+            return
+        floor = self.offset_ns + int(OFFSET_DRIFT * max(0, arrival_ns - self._at_ns))
+        self.offset_ns, self._at_ns = min(d, floor), arrival_ns
+
+    def age_ns(self, now_ns: int, stamp_ns: int) -> int:
+        """Age of a sample stamped ``stamp_ns`` (vehicle clock) at loop time ``now_ns``."""
+        if self.offset_ns is None:
+            return 0
+        floor = self.offset_ns + int(OFFSET_DRIFT * max(0, now_ns - self._at_ns))
+        return now_ns - floor - stamp_ns
 
 
 
@@ -34,6 +68,8 @@ class VehicleStatus:
     battery_voltage_v: float | None = None
     battery_remaining_pct: int | None = None
     time_boot_ms: int = 0
+    #: EKF_STATUS_REPORT flags (None: never reported).
+    ekf_flags: int | None = None
     statustext: deque = field(default_factory=lambda: deque(maxlen=64))
     #: custom_mode -> the mode's name (the autopilot profile's).
     mode_name: Callable[[int], str] = field(default=copter_mode_name, repr=False)
@@ -57,7 +93,8 @@ class Telemetry:
 
     def __init__(self, estimator: StateEstimator, position_var_m2=(0.0025,) * 3, velocity_var_m2_s2=(0.0025,) * 3,
                  on_event: Callable[[str, str], None] | None = None, target_component: int = 1,
-                 validator: TelemetryValidator | None = None, mode_name: Callable[[int], str] = copter_mode_name) -> None:
+                 validator: TelemetryValidator | None = None,
+                 mode_name: Callable[[int], str] = copter_mode_name) -> None:
         self.target_component = target_component
         self.estimator = estimator
         self.position_var = tuple(position_var_m2)
@@ -65,6 +102,13 @@ class Telemetry:
         self.status = VehicleStatus(mode_name=mode_name)
         self.on_event = on_event
         self.last_ns: dict[str, int] = {}
+        #: The vehicle's time stamp of the newest ATTITUDE / LOCAL_POSITION_NED sample [ns].
+        self.stamp_ns: dict[str, int] = {}
+        self.time_map = VehicleTimeMap()
+        #: The loop's clock is the vehicle's own time (lockstep, paced): set by the session.
+        self.on_vehicle_clock = False
+        #: The autopilot's AUTOPILOT_VERSION, once received.
+        self.autopilot_version = None
         self.timesync_rtt_ms: float | None = None
         self.timesync_samples_ms: list[float] = []
         self.timesync_sent: set[int] = set()
@@ -90,31 +134,25 @@ class Telemetry:
                 return
             er = body_rates_to_euler_rates(msg.roll, msg.pitch, msg.rollspeed, msg.pitchspeed, msg.yawspeed)
             self.estimator.set_attitude(msg.roll, msg.pitch, msg.yaw, *er)
-            st.time_boot_ms = max(st.time_boot_ms, int(msg.time_boot_ms))
+            self._stamp(t, int(msg.time_boot_ms), now_ns)
         elif t == "LOCAL_POSITION_NED":
             if not v.position(msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz, int(msg.time_boot_ms)):
                 return
             self.estimator.correct_position(ned_to_paper_position(msg.x, msg.y, msg.z), self.position_var)
             self.estimator.correct_velocity(ned_to_paper_velocity(msg.vx, msg.vy, msg.vz), self.velocity_var)
-            st.time_boot_ms = max(st.time_boot_ms, int(msg.time_boot_ms))
+            self._stamp(t, int(msg.time_boot_ms), now_ns)
         self.last_ns[t] = now_ns
         self.counts[t] = self.counts.get(t, 0) + 1
         if t in ("ATTITUDE", "LOCAL_POSITION_NED"):
             return
         if t == "HEARTBEAT":
-            armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
-            if armed != st.armed:
-                st.armed = armed
-                self._event("arming", "armed" if armed else "disarmed")
-            if msg.custom_mode != st.custom_mode:
-                st.custom_mode = int(msg.custom_mode)
-                self._event("mode", st.mode)
-            st.system_status = int(msg.system_status)
+            self._heartbeat(msg)
         elif t == "SYS_STATUS":
-            if msg.voltage_battery != 65535 and v.voltage(msg.voltage_battery / 1000.0):
-                st.battery_voltage_v = msg.voltage_battery / 1000.0
-            if msg.battery_remaining >= 0:
-                st.battery_remaining_pct = int(msg.battery_remaining)
+            self._sys_status(msg)
+        elif t == "EKF_STATUS_REPORT":
+            st.ekf_flags = int(msg.flags)
+        elif t == "AUTOPILOT_VERSION":
+            self.autopilot_version = msg
         elif t == "STATUSTEXT":
             text = msg.text.decode(errors="replace") if isinstance(msg.text, bytes) else str(msg.text)
             text = text.rstrip("\x00")
@@ -129,10 +167,50 @@ class Telemetry:
                 self.timesync_rtt_ms = rtt_ms
                 self.timesync_samples_ms.append(rtt_ms)
 
+    def _heartbeat(self, msg) -> None:
+        """Arming, flight mode and system status from a HEARTBEAT (events for the changes)."""
+        st = self.status
+        armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+        if armed != st.armed:
+            st.armed = armed
+            self._event("arming", "armed" if armed else "disarmed")
+        if msg.custom_mode != st.custom_mode:
+            st.custom_mode = int(msg.custom_mode)
+            self._event("mode", st.mode)
+        st.system_status = int(msg.system_status)
+
+    def _sys_status(self, msg) -> None:
+        """Battery voltage (validated; 65535 = not reported) and remaining charge (-1 = not reported)."""
+        st = self.status
+        if msg.voltage_battery != 65535 and self.validator.voltage(msg.voltage_battery / 1000.0):
+            st.battery_voltage_v = msg.voltage_battery / 1000.0
+        if msg.battery_remaining >= 0:
+            st.battery_remaining_pct = int(msg.battery_remaining)
+
+    def _stamp(self, message: str, time_boot_ms: int, now_ns: int) -> None:
+        stamp = time_boot_ms * 1_000_000
+        self.stamp_ns[message] = max(self.stamp_ns.get(message, 0), stamp)
+        # On the vehicle's own clock (lockstep, paced) the loop's "now" is the newest stamp so far: this
+        # sample cannot have arrived before its own time.
+        self.time_map.observe(max(now_ns, stamp) if self.on_vehicle_clock else now_ns, stamp)
+        st = self.status
+        st.time_boot_ms = max(st.time_boot_ms, time_boot_ms)
+
+    def vehicle_time_ns(self) -> int:
+        """The newest vehicle time stamp received [ns] (the clock of lockstep and paced flights)."""
+        return self.status.time_boot_ms * 1_000_000
+
     def age_s(self, message: str, now_ns: int) -> float:
-        """Seconds since ``message`` last arrived (inf if never)."""
+        """How old the newest ``message`` is (inf if never): since it arrived, or by its own time stamp on
+        the vehicle's clock when that is older (a sample delivered late)."""
         t = self.last_ns.get(message)
-        return float("inf") if t is None else (now_ns - t) / 1e9
+        if t is None:
+            return float("inf")
+        age = now_ns - t
+        stamp = self.stamp_ns.get(message)
+        if stamp is not None:
+            age = max(age, self.time_map.age_ns(now_ns, stamp))
+        return age / 1e9
 
     def fresh(self, now_ns: int, stale_s: float) -> bool:
         """Attitude and position both newer than ``stale_s``."""

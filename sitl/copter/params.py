@@ -81,6 +81,19 @@ def ardupilot_params(vehicle: VehicleParams) -> list[ParamSpec]:
         ParamSpec("ATC_RATE_R_MAX", 0.0, f, 0.0, 1080.0, "deg/s", "Roll rate limit (0 = none)"),
         ParamSpec("ATC_RATE_P_MAX", 0.0, f, 0.0, 1080.0, "deg/s", "Pitch rate limit (0 = none)"),
         ParamSpec("ATC_RATE_Y_MAX", 0.0, f, 0.0, 1080.0, "deg/s", "Yaw rate limit (0 = none)"),
+        # Known so that a ground station can set them as it does on ArduCopter (ArduPilot's defaults);
+        # the emulated inner loop does not model them yet: it always flies the quaternion
+        # unshaped (as ATC_RATE_FF_ENAB = 0) and has no GCS failsafe.
+        ParamSpec("ATC_RATE_FF_ENAB", 1, i8, 0, 1, "",
+                  "Rate feed-forward and input shaping (1); 0: targets flown unshaped (not modelled)"),
+        ParamSpec("ATC_ACC_R_MAX", 1100.0, f, 0.0, 180000.0, "deg/s/s", "Roll acceleration limit (not modelled)"),
+        ParamSpec("ATC_ACC_P_MAX", 1100.0, f, 0.0, 180000.0, "deg/s/s", "Pitch acceleration limit (not modelled)"),
+        ParamSpec("ATC_ACC_Y_MAX", 270.0, f, 0.0, 72000.0, "deg/s/s", "Yaw acceleration limit (not modelled)"),
+        ParamSpec("FS_GCS_ENABLE", 0, i8, 0, 7, "",
+                  "Ground-station failsafe: 0 off, 1 RTL, ..., 5 Land (not modelled: no GCS failsafe)"),
+        ParamSpec("FS_GCS_TIMEOUT", 5.0, f, 2.0, 120.0, "s", "Ground-station failsafe timeout (not modelled)"),
+        ParamSpec("MAV_GCS_SYSID", 255, i16, 1, 255, "",
+                  "System id of the ground station (ArduPilot 4.7+ name of SYSID_MYGCS)"),
         ParamSpec("ARMING_CHECK", 1, i32, 0, 2 ** 31 - 1, "", "Arming checks (0 = none)"),
         ParamSpec("BATT_CAPACITY", float(round(vehicle.battery.capacity_mah)), i32, 0, 1e6, "mAh", "Pack capacity"),
         ParamSpec("BATT_LOW_VOLT", round(3.5 * cells, 2), f, 0.0, 100.0, "V",

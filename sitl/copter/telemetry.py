@@ -39,10 +39,13 @@ _SENSORS = (0x1 | 0x2 | 0x8 | 0x20 | 0x400 | 0x800 | 0x1000 | 0x2000 | 0x8000 | 
 
 # ArduPilot 4.8.0-dev: major << 24 | minor << 16 | patch << 8 | FIRMWARE_VERSION_TYPE_DEV (0)
 FLIGHT_SW_VERSION = (4 << 24) | (8 << 16)
+#: ... and SET_ACTUATOR_CONTROL_TARGET (bit 1024, MAV_PROTOCOL_CAPABILITY_SET_ACTUATOR_TARGET): this SITL takes it.
 CAPABILITIES = (
     mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | 1024
 )
+#: ``flight_custom_version``: the mark by which gcs knows its own simulator (gcs.vehicles.firmware).
+BUILTIN_SITL_MARK = list(b"gcssitl\0")
 
 
 class TelemetryCounters:
@@ -184,7 +187,7 @@ def _attitude_target(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_m
 def autopilot_version(sim: Simulation) -> mavlink.MAVLink_message:
     """AUTOPILOT_VERSION (answer to MAV_CMD_REQUEST_MESSAGE 148 / REQUEST_AUTOPILOT_CAPABILITIES)."""
     return mavlink.MAVLink_autopilot_version_message(
-        CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0, [0] * 18)
+        CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, BUILTIN_SITL_MARK, [0] * 8, [0] * 8, 0, 0, 0, [0] * 18)
 
 
 BUILDERS: dict[int, Callable[[Simulation, TelemetryCounters], mavlink.MAVLink_message | None]] = {

@@ -132,7 +132,7 @@ class ServerLoop:
     def _thread_main(self) -> None:
         try:
             self.run()
-        except BaseException as exc:  # noqa: BLE001 - re-raised by stop()
+        except BaseException as exc:  # logged here, re-raised by stop()
             log.exception("%s failed", self.name)
             self._error = exc
 

@@ -29,7 +29,7 @@ def fly(request, tmp_path):
     return run
 
 
-def pytest_terminal_summary(terminalreporter, exitstatus, config):  # noqa: ARG001
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
     reg = hostile_kit.REGISTRY
     if not reg:
         return
@@ -43,7 +43,7 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):  # noqa: ARG0
             per_fault[name] = per_fault.get(name, 0) + f["injected_bytes"] + f["mutated_bytes"]
     for r in reg:
         tr.write_line(f"{'FAIL' if r['problems'] else 'ok  '} {r['test'].split('::')[-1]:<48} exit {r['rc']!s:>4} "
-                      f"{str(r['reason']):<18} {r['wall_s']:6.1f} s  injected {r['injected_bytes']:>9} B  "
+                      f"{r['reason']!s:<18} {r['wall_s']:6.1f} s  injected {r['injected_bytes']:>9} B  "
                       f"mutated {r['mutated_bytes']:>8} B")
     tr.write_line("per fault (injected + mutated bytes): "
                   + ", ".join(f"{k} {v}" for k, v in sorted(per_fault.items(), key=lambda kv: -kv[1])))

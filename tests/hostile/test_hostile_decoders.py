@@ -26,8 +26,8 @@ from hypothesis import strategies as st
 
 os.environ.setdefault("MAVLINK20", "1")
 
-from gcs.link.mavlink import LinkError, MavlinkLink, mavlink  # noqa: E402
-from quadrotor import rig_protocol as rp  # noqa: E402
+from gcs.link.mavlink import LinkError, MavlinkLink, mavlink
+from quadrotor import rig_protocol as rp
 
 SETTINGS = settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                                              HealthCheck.function_scoped_fixture])

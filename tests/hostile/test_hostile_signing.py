@@ -28,7 +28,7 @@ import time
 import pytest
 
 from hostile_kit import Spec, free_udp_port, report, sitl_supports, udp_port_bound
-from mitm import ForgedSigned, GarbageDatagrams, HostileFields, OtherSystem, decode_frames, mavlink, _parser
+from mitm import ForgedSigned, GarbageDatagrams, HostileFields, OtherSystem, decode_frames, mavlink, new_parser
 
 KEY_HEX = "42" * 16 + "a5" * 16
 KEY = bytes.fromhex(KEY_HEX)
@@ -67,7 +67,7 @@ class SignedClient:
             self.mav.signing.sign_outgoing = True
             self.mav.signing.link_id = 0
             self.mav.signing.timestamp = signing_now() if timestamp is None else timestamp
-        self.parser = _parser()
+        self.parser = new_parser()
         self.armed: bool | None = None
         self.heartbeats = 0
         self.acks: list[tuple[int, int]] = []
@@ -98,7 +98,7 @@ class SignedClient:
         while time.monotonic() < end and not (until is not None and until()):
             try:
                 data = self.sock.recv(65535)
-            except (socket.timeout, OSError):
+            except (TimeoutError, OSError):
                 continue
             for m in decode_frames(self.parser, data):
                 if m.get_srcSystem() != 1:

@@ -109,7 +109,7 @@ def test_mixer_round_trip_and_saturation():
 def test_ultrasonic_quantisation_and_minimum_range():
     sen = RigSensors(RigSensorParams.ideal(), random.Random(0))
     res = 0.04
-    for i in range(0, 300):
+    for i in range(300):
         z = i * 0.005
         alt, out = sen.altitude(z)
         assert abs(alt / res - round(alt / res)) < 1e-9, "a multiple of 4 cm"
@@ -124,7 +124,7 @@ def test_ultrasonic_quantisation_and_minimum_range():
 def test_landed_reads_zero_or_four_centimetres_with_noise():
     sen = RigSensors(RigSensorParams(), random.Random(3))
     readings = [sen.measure(State()).altitude_m for _ in range(400)]
-    assert set(round(r, 3) for r in readings) == {0.0, 0.04}
+    assert {round(r, 3) for r in readings} == {0.0, 0.04}
 
 
 def test_telemetry_altitude_is_in_millimetres_and_flags_out_of_range():

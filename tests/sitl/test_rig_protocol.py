@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import struct
+from itertools import pairwise
 
 import pytest
 from hypothesis import given, settings
@@ -120,7 +121,7 @@ def test_any_chunking_gives_the_same_messages(msgs, cuts):
     stream = b"".join(rp.encode(m) for m in msgs)
     points = sorted({min(c, len(stream)) for c in cuts} | {0, len(stream)})
     dec = rp.RigDecoder()
-    out = [m for a, b in zip(points, points[1:]) for m in dec.feed(stream[a:b])]
+    out = [m for a, b in pairwise(points) for m in dec.feed(stream[a:b])]
     assert out == msgs and dec.counters.errors == 0
 
 

@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from itertools import pairwise
 
 import pytest
 import serial
@@ -203,7 +204,7 @@ def test_real_time_mode_streams_200_hz_and_the_watchdog_lands_it(rig_factory):
     got = pc.telemetry[n0:]
     rate = len(got) / wall
     assert 120 < rate < 230, rate                       # 200 Hz, loose for a busy machine
-    gaps = sum(b.time_us - a.time_us != 5000 for a, b in zip(got, got[1:]))
+    gaps = sum(b.time_us - a.time_us != 5000 for a, b in pairwise(got))
     assert gaps <= 2, "every tick sends one frame (a stalled machine may overflow the radio queue)"
     assert max(t.altitude_m for t in got) >= 0.04
     assert pc.wait_for(lambda m: isinstance(m, rp.Telemetry) and m.control_seq == seq, 1.0) is not None

@@ -211,7 +211,7 @@ def test_tcp_stream_resynchronises_after_garbage():
             s.settimeout(0.2)
             try:
                 data = s.recv(65535)
-            except socket.timeout:
+            except TimeoutError:
                 continue
             got = any(m.get_type() == "PARAM_VALUE" for m in parser.parse_buffer(data) or [])
         assert got

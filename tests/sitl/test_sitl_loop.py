@@ -180,5 +180,5 @@ def test_ticks_per_step():
     assert ticks_per_step(0.01, 400, "inner-loop") == 4
     assert ticks_per_step(0.01, 200.0, "onboard") == 2
     for bad in (0.003, 0.0, -0.01, float("nan"), float("inf")):
-        with pytest.raises(UsageError, match="multiple of the 2.5 ms inner-loop period"):
+        with pytest.raises(UsageError, match=r"multiple of the 2\.5 ms inner-loop period"):
             ticks_per_step(bad, 400, "inner-loop")

@@ -97,7 +97,7 @@ def test_arming_refused_while_leaning_or_not_landed(make_server, make_gcs):
         gcs = make_gcs(srv)
         gcs.set_mode(GUIDED_NOGPS)
         assert gcs.arm().result == M.MAV_RESULT_FAILED
-        assert gcs.recv("STATUSTEXT", cond=lambda m: m.text.startswith(words)) is not None
+        assert gcs.recv("STATUSTEXT", cond=lambda m, words=words: m.text.startswith(words)) is not None
         assert gcs.arm(force=True).result == M.MAV_RESULT_ACCEPTED   # 21196 forces
 
 

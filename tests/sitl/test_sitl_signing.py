@@ -66,7 +66,7 @@ class Client:
         while time.monotonic() < end:
             try:
                 data = self.sock.recv(65535)
-            except socket.timeout:
+            except TimeoutError:
                 continue
             for m in self.parser.parse_buffer(data) or []:
                 if m.get_type() == "COMMAND_ACK" and m.command == command:

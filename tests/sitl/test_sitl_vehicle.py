@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import statistics
 import textwrap
+from itertools import pairwise
 
 import numpy as np
 import pytest
@@ -78,7 +79,7 @@ def test_invalid_vehicles_name_the_key(data, key, words):
 
 
 def test_unknown_vehicle_and_bad_toml(tmp_path):
-    with pytest.raises(ConfigError, match="bundled: .*quad-1kg"):
+    with pytest.raises(ConfigError, match=r"bundled: .*quad-1kg"):
         load_vehicle("no-such-vehicle")
     p = tmp_path / "bad.toml"
     p.write_text("[vehicle\n")
@@ -111,7 +112,7 @@ def test_battery_model():
     v = load_vehicle()
     bp = v.battery
     ocv = [batt.open_circuit_voltage(c / 100, bp) for c in range(101)]
-    assert all(b >= a for a, b in zip(ocv, ocv[1:])) and ocv[-1] == pytest.approx(12.6) and ocv[0] > 9.0
+    assert all(b >= a for a, b in pairwise(ocv)) and ocv[-1] == pytest.approx(12.6) and ocv[0] > 9.0
     hover = v.mass_kg * v.gravity_m_s2 / 4
     power = batt.rotor_power_w([hover] * 4, v.rotors)
     assert 60.0 < power < 150.0           # about 100 W/kg for a 1 kg quad

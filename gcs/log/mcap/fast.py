@@ -9,7 +9,6 @@ from typing import Any
 
 from mcap.opcode import Opcode
 from mcap.records import MessageIndex
-
 from mcap.writer import Writer
 
 __all__ = ["FastMessageIndex", "FastWriter"]

@@ -20,6 +20,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from mcap.data_stream import ReadDataStream
+from mcap.reader import make_reader
 from mcap.records import Attachment, Channel, Chunk, Footer, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
@@ -39,7 +40,6 @@ from gcs.log.mcap.scan import (
     decompress_chunk,
     open_checked,
 )
-from mcap.reader import make_reader
 
 __all__ = ["MAGIC", "AttachmentInfo", "ChannelInfo", "McapLog", "read_attachment", "read_log"]
 

@@ -29,9 +29,10 @@ from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
+from mcap.writer import CompressionType, IndexType
+
 from gcs.errors import LogError
 from gcs.log.mcap.fast import FastWriter
-from mcap.writer import CompressionType, IndexType
 
 __all__ = ["COMPRESSIONS", "MIN_FREE_BYTES", "McapWriter", "best_compression", "check_writable"]
 

@@ -22,6 +22,14 @@ import json
 import sys
 from typing import Any
 
+from gcs.config import load_config
+from gcs.log.review.export import export_csv
+from gcs.log.review.info import log_info
+from gcs.log.review.metrics import compare_logs, log_metrics
+from gcs.log.review.plot import plot_log
+from gcs.metrics import METRICS
+from gcs.report import format_table
+
 __all__ = ["add_log_parser", "cmd_log"]
 
 
@@ -114,13 +122,10 @@ def _format_info(info: dict, max_events: int) -> str:
 def _config(args: argparse.Namespace) -> Any:
     if not getattr(args, "config", None):
         return None
-    from gcs.config import load_config
     return load_config(args.config)
 
 
 def _metrics_text(doc: dict) -> str:
-    from gcs.metrics import METRICS
-    from gcs.report import format_table
 
     lines = []
     for f in doc["flights"]:
@@ -142,7 +147,6 @@ def _metrics_text(doc: dict) -> str:
 
 
 def _compare_text(doc: dict) -> str:
-    from gcs.report import format_table
 
     n = ", ".join(f"{name}: {g['flights']}" for name, g in doc["groups"].items())
     title = (f"{len(doc['files'])} log(s), experiment(s) {', '.join(doc['experiments'])}; "
@@ -154,7 +158,6 @@ def cmd_log(args: argparse.Namespace) -> int:
     """Run a ``gcs log`` action (errors are :class:`gcs.errors.GcsError`, printed by :func:`gcs.cli.main`)."""
     action = args.log_command
     if action == "info":
-        from gcs.log.review.info import log_info
         info = log_info(args.file)
         if args.json:
             print(json.dumps(info))
@@ -163,26 +166,22 @@ def cmd_log(args: argparse.Namespace) -> int:
         _warn_truncated(info["file"], info["truncated"], info["problem"])
         return 0
     if action == "metrics":
-        from gcs.log.review.metrics import log_metrics
         doc = log_metrics(args.file, _config(args))
         print(json.dumps(doc) if args.json else _metrics_text(doc))
         _warn_truncated(doc["file"], doc["truncated"], doc["problem"])
         return 0
     if action == "plot":
-        from gcs.log.review.plot import plot_log
         res = plot_log(args.file, args.output, flight=args.flight)
         print(f"{res['out']}: flight {res['flight']}; panels: {', '.join(res['panels'])}")
         _warn_truncated(res["file"], res["truncated"], res["problem"])
         return 0
     if action == "compare":
-        from gcs.log.review.metrics import compare_logs
         doc = compare_logs(args.files, _config(args))
         print(json.dumps(doc) if args.json else _compare_text(doc))
         for f in doc["files"]:
             _warn_truncated(f["file"], f["truncated"], f["problem"])
         return 0
     if action == "export":
-        from gcs.log.review.export import export_csv
         res = export_csv(args.file, args.csv)
         for c in res["channels"]:
             print(f"{c['csv']}: {c['rows']} rows ({c['topic']})")

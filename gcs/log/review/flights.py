@@ -24,9 +24,12 @@ from typing import Any
 
 import numpy as np
 
+from gcs.config import parse_config
 from gcs.errors import LogError
 from gcs.log import topics as T
 from gcs.log.mcap.reader import McapLog
+from gcs.metrics import FlightRecord, controller_cost, flight_metrics
+from gcs.mission import Mission
 
 __all__ = [
     "METRIC_TOPICS",
@@ -175,7 +178,6 @@ def flight_record(log: McapLog, flight: LoggedFlight, ts_s: float) -> tuple[Any,
 def record_from_arrays(state: np.ndarray, ref: np.ndarray, command: np.ndarray, steps_to_go: np.ndarray,
                        ts_s: float, planned_steps: int | None, what: str) -> tuple[Any, bool]:
     """A :class:`gcs.metrics.FlightRecord` from logged series (see :func:`flight_record`), and whether it is partial."""
-    from gcs.metrics import FlightRecord
 
     s, r, u, j = state, ref, command, steps_to_go
     # A complete flight logs the state and reference after its last command (K commands, K + 1
@@ -202,7 +204,6 @@ def log_config(log: McapLog, override: Any = None) -> Any:
     """
     if override is not None:
         return override
-    from gcs.config import parse_config
 
     att = log.attachment("config.json")
     if att is None:
@@ -225,8 +226,6 @@ def logged_metrics(log: McapLog, config: Any = None) -> list[dict]:
         "in_run"}`` per flight; ``in_run`` is the ``/sim/metrics`` message of a simulated flight
         (what ``gcs sim`` computed) or None.
     """
-    from gcs.metrics import controller_cost, flight_metrics
-    from gcs.mission import Mission
 
     cfg = log_config(log, config)
     mission = Mission(cfg.mission, zero_velocity=cfg.experiment.zero_velocity_reference)

@@ -9,12 +9,12 @@ from typing import Any
 from gcs.errors import LogError
 from gcs.log.review.flights import log_config
 from gcs.log.review.stream import stream_metrics
+from gcs.metrics import summarize
 
 __all__ = ["compare_logs", "log_metrics"]
 
 
 def _summaries(rows: Iterable[dict], key) -> dict[str, dict]:
-    from gcs.metrics import summarize
 
     groups: dict[str, list[dict]] = {}
     for r in rows:

@@ -17,6 +17,8 @@ from gcs.errors import LogError
 from gcs.log import topics as T
 from gcs.log.mcap.reader import McapLog, read_attachment, read_log
 from gcs.log.review.flights import METRIC_TOPICS, as_int, log_config, logged_metrics, positive_float, record_from_arrays
+from gcs.metrics import controller_cost, flight_metrics
+from gcs.mission import Mission
 
 __all__ = ["stream_metrics"]
 
@@ -42,7 +44,6 @@ class _MetricsStream:
     """Computes each flight's metrics when the next one begins, holding one flight at a time."""
 
     def __init__(self, path: Any, cfg: Any) -> None:
-        from gcs.mission import Mission
 
         self.path = path
         self.cfg = cfg
@@ -109,7 +110,6 @@ class _MetricsStream:
             self.closed.append((info, (record, steps, partial)))
 
     def measure(self, record: Any, controller: str) -> dict[str, float]:
-        from gcs.metrics import controller_cost, flight_metrics
 
         try:
             cost = controller_cost(controller, self.cfg)

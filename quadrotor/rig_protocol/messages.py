@@ -1,68 +1,8 @@
-"""Wire format of the 4-DOF rig's serial link (XBee API mode 2 framing).
+"""The rig protocol's messages: type ids, payload layouts (little-endian structs), flags and states.
 
-Shared by the rig emulator (:mod:`sitl.rig`) and the ground station; it
-imports nothing but the standard library.  ``docs/rig-protocol.md`` has the
-same tables with the link budget and the rig's behaviour.
-
-Framing
--------
-``0x7E | length (uint16, big-endian) | frame data | checksum``, where the
-frame data is ``type (uint8) | payload`` and ``length`` counts the frame data
-(type byte included).  ``checksum = 0xFF - (sum(frame data) & 0xFF)``, so the
-sum of the frame data and the checksum is ``0xFF (mod 256)``.  Escaping (API
-mode 2): every byte after the start delimiter (length, frame data, checksum)
-that is 0x7E, 0x7D, 0x11 or 0x13 is sent as ``0x7D, byte ^ 0x20``; the length
-and the checksum are computed on the unescaped bytes.  An unescaped 0x7E
-always starts a new frame, which is how a receiver resynchronises.
-
-Payloads are **little-endian** and packed (no padding); ``f32`` is IEEE 754
-binary32.  Type ids with bit 7 set go from the rig to the PC.
-
-==========  ====  ===========  =====================================================  =======  =====
-message     type  direction    payload (little-endian, in order)                      payload  frame
-==========  ====  ===========  =====================================================  =======  =====
-CONTROL     0x01  PC -> rig    seq u16, thrust_n f32, roll_accel_rad_s2 f32,          18       23
-                               pitch_accel_rad_s2 f32, yaw_accel_rad_s2 f32
-CONTROL_PWM 0x02  PC -> rig    seq u16, pwm[4] u16 (10-bit: 0..1023, motors 1..4)     10       15
-ARM         0x03  PC -> rig    seq u8 (echoed by ACK)                                 1        6
-DISARM      0x04  PC -> rig    seq u8 (echoed by ACK)                                 1        6
-HEARTBEAT   0x05  PC -> rig    time_us u32 (PC clock; echoed by STATUS)               4        9
-TELEMETRY   0x81  rig -> PC    time_us u32, roll_rad f32, pitch_rad f32, yaw_rad f32, 38       43
-                               roll_rate_rad_s f32, pitch_rate_rad_s f32,
-                               yaw_rate_rad_s f32, x_m f32, altitude_mm u16,
-                               flags u16, control_seq u16
-STATUS      0x82  rig -> PC    time_us u32, state u8, protocol_version u8,            47       52
-                               fw_major u8, fw_minor u8, fw_patch u8, flags u16,
-                               rx_frames u32, rx_checksum_errors u32,
-                               rx_length_errors u32, rx_unknown_types u32,
-                               rx_invalid_values u32, rx_truncated_frames u32,
-                               rx_discarded_bytes u32, cutoffs u16,
-                               watchdog_trips u16, heartbeat_echo_us u32
-ACK         0x83  rig -> PC    acked_type u8, seq u8, result u8                       3        8
-==========  ====  ===========  =====================================================  =======  =====
-
-"frame" is the unescaped size on the wire (payload + 5); escaping adds one
-byte per special byte.  ``time_us`` is the sender's clock in microseconds,
-modulo 2**32 (wraps after 71.6 min).  ``seq`` fields wrap.
-
-Field meanings: ``thrust_n`` is the collective thrust [N] along the body z
-axis; the three accelerations are the angular accelerations of the paper's
-reduced model (unit inertia) [rad/s^2]; ``altitude_mm`` is the ultrasonic
-reading [mm] (4 cm steps); ``x_m`` the measured position along the rig's x
-rail [m]; ``flags`` is a :class:`RigFlags` bitfield, ``state`` a
-:class:`RigState`, ``result`` an :class:`AckResult`; ``control_seq`` is the
-sequence number of the last CONTROL / CONTROL_PWM the rig received.
-
-Usage::
-
-    from sitl import rig_protocol as rp
-
-    port.write(rp.encode(rp.Arm(seq=1)))
-    dec = rp.RigDecoder(rp.TO_PC)              # accept only rig -> PC types
-    for msg in dec.feed(port.read(4096)):      # any chunking; never raises
-        if isinstance(msg, rp.Telemetry):
-            ...
-    dec.counters.checksum_errors               # what was dropped, and why
+Each message is a frozen dataclass with its ``TYPE`` byte, its ``STRUCT`` and its fields' wire
+kinds (``KINDS``); :meth:`MessageBase.pack` refuses a value that does not fit its wire type.
+The framing (start byte, length, escaping, checksum) is :mod:`quadrotor.rig_protocol.framing`.
 """
 
 from __future__ import annotations
@@ -70,20 +10,11 @@ from __future__ import annotations
 import enum
 import math
 import operator
-import re
 import struct
 from dataclasses import dataclass, fields
-from typing import ClassVar, Iterable, Union
+from typing import ClassVar
 
 from quadrotor.errors import ProtocolError
-
-__all__ = [
-    "START", "ESCAPE", "XOR", "SPECIAL_BYTES", "MAX_FRAME_DATA", "PROTOCOL_VERSION", "PWM_MAX",
-    "RigFlags", "CUTOFF_CAUSES", "RigState", "AckResult",
-    "Control", "ControlPwm", "Arm", "Disarm", "Heartbeat", "Telemetry", "Status", "Ack",
-    "Message", "MESSAGE_TYPES", "TO_RIG", "TO_PC", "frame_size",
-    "encode", "escape", "DecoderCounters", "RigDecoder",
-]
 
 START = 0x7E
 ESCAPE = 0x7D
@@ -163,7 +94,7 @@ def _f32(name: str, value: object) -> float:
     return v
 
 
-class _Message:
+class MessageBase:
     """Base of the message dataclasses: packing from the class's struct and field kinds."""
 
     TYPE: ClassVar[int]
@@ -182,7 +113,7 @@ class _Message:
         return self.STRUCT.pack(*vals)
 
     @classmethod
-    def unpack(cls, payload: bytes | bytearray | memoryview) -> "_Message":
+    def unpack(cls, payload: bytes | bytearray | memoryview) -> MessageBase:
         """Message from a payload of exactly ``STRUCT.size`` bytes; ValueError if a field is invalid."""
         return cls(*cls.STRUCT.unpack(payload))
 
@@ -192,7 +123,7 @@ def _kinds(*items: str) -> tuple[tuple[str, str], ...]:
 
 
 @dataclass(frozen=True, slots=True)
-class Control(_Message):
+class Control(MessageBase):
     """PC -> rig: thrust and angular-acceleration demand, applied until the next one.
 
     Attributes
@@ -219,7 +150,7 @@ class Control(_Message):
 
 
 @dataclass(frozen=True, slots=True)
-class ControlPwm(_Message):
+class ControlPwm(MessageBase):
     """PC -> rig: the four motors' 10-bit PWM values, applied until the next control frame.
 
     Attributes
@@ -252,7 +183,7 @@ class ControlPwm(_Message):
         return self.STRUCT.pack(seq, *vals)
 
     @classmethod
-    def unpack(cls, payload: bytes | bytearray | memoryview) -> "ControlPwm":
+    def unpack(cls, payload: bytes | bytearray | memoryview) -> ControlPwm:
         seq, *pwm = cls.STRUCT.unpack(payload)
         if max(pwm) > PWM_MAX:
             raise ValueError(f"PWM value above {PWM_MAX}: {pwm}")
@@ -260,7 +191,7 @@ class ControlPwm(_Message):
 
 
 @dataclass(frozen=True, slots=True)
-class Arm(_Message):
+class Arm(MessageBase):
     """PC -> rig: arm the motors (accepted only when landed); answered by ACK with ``seq``."""
 
     TYPE: ClassVar[int] = 0x03
@@ -271,7 +202,7 @@ class Arm(_Message):
 
 
 @dataclass(frozen=True, slots=True)
-class Disarm(_Message):
+class Disarm(MessageBase):
     """PC -> rig: stop the motors at once (also in the air) and clear a latched cut-off."""
 
     TYPE: ClassVar[int] = 0x04
@@ -282,7 +213,7 @@ class Disarm(_Message):
 
 
 @dataclass(frozen=True, slots=True)
-class Heartbeat(_Message):
+class Heartbeat(MessageBase):
     """PC -> rig: a ping; the rig answers with STATUS echoing ``time_us`` [µs, uint32]."""
 
     TYPE: ClassVar[int] = 0x05
@@ -293,7 +224,7 @@ class Heartbeat(_Message):
 
 
 @dataclass(frozen=True, slots=True)
-class Telemetry(_Message):
+class Telemetry(MessageBase):
     """Rig -> PC, every 5 ms (200 Hz): IMU, ultrasonic altitude, x, flags.
 
     Attributes
@@ -333,7 +264,7 @@ class Telemetry(_Message):
     control_seq: int
 
     @classmethod
-    def unpack(cls, payload: bytes | bytearray | memoryview) -> "Telemetry":
+    def unpack(cls, payload: bytes | bytearray | memoryview) -> Telemetry:
         v = cls.STRUCT.unpack(payload)
         return cls(*v[:9], RigFlags(v[9]), v[10])
 
@@ -344,7 +275,7 @@ class Telemetry(_Message):
 
 
 @dataclass(frozen=True, slots=True)
-class Status(_Message):
+class Status(MessageBase):
     """Rig -> PC, once a second of rig time, in answer to HEARTBEAT and to a new peer.
 
     Attributes
@@ -395,7 +326,7 @@ rx_truncated_frames, rx_discarded_bytes : int
     heartbeat_echo_us: int
 
     @classmethod
-    def unpack(cls, payload: bytes | bytearray | memoryview) -> "Status":
+    def unpack(cls, payload: bytes | bytearray | memoryview) -> Status:
         v = list(cls.STRUCT.unpack(payload))
         v[1] = RigState(v[1])          # ValueError on an unknown state
         v[6] = RigFlags(v[6])
@@ -403,7 +334,7 @@ rx_truncated_frames, rx_discarded_bytes : int
 
 
 @dataclass(frozen=True, slots=True)
-class Ack(_Message):
+class Ack(MessageBase):
     """Rig -> PC: answer to ARM / DISARM.
 
     Attributes
@@ -425,19 +356,19 @@ class Ack(_Message):
     result: int
 
     @classmethod
-    def unpack(cls, payload: bytes | bytearray | memoryview) -> "Ack":
+    def unpack(cls, payload: bytes | bytearray | memoryview) -> Ack:
         t, seq, result = cls.STRUCT.unpack(payload)
         return cls(t, seq, AckResult(result))
 
 
-Message = Union[Control, ControlPwm, Arm, Disarm, Heartbeat, Telemetry, Status, Ack]
+Message = Control | ControlPwm | Arm | Disarm | Heartbeat | Telemetry | Status | Ack
 
 #: Type id -> message class.
-MESSAGE_TYPES: dict[int, type[_Message]] = {
+MESSAGE_TYPES: dict[int, type[MessageBase]] = {
     c.TYPE: c for c in (Control, ControlPwm, Arm, Disarm, Heartbeat, Telemetry, Status, Ack)}
 #: What the rig accepts (PC -> rig) and what the PC accepts (rig -> PC).
-TO_RIG: tuple[type[_Message], ...] = (Control, ControlPwm, Arm, Disarm, Heartbeat)
-TO_PC: tuple[type[_Message], ...] = (Telemetry, Status, Ack)
+TO_RIG: tuple[type[MessageBase], ...] = (Control, ControlPwm, Arm, Disarm, Heartbeat)
+TO_PC: tuple[type[MessageBase], ...] = (Telemetry, Status, Ack)
 
 
 def _check_consistency() -> None:
@@ -452,201 +383,6 @@ def _check_consistency() -> None:
 _check_consistency()
 
 
-def frame_size(cls: type[_Message]) -> int:
+def frame_size(cls: type[MessageBase]) -> int:
     """Unescaped size of a frame of this type on the wire [bytes]."""
     return 1 + 2 + 1 + cls.STRUCT.size + 1
-
-
-_SPECIAL_RE = re.compile(b"[\x7e\x7d\x11\x13]")
-_ESCAPED = {b: bytes((ESCAPE, b ^ XOR)) for b in SPECIAL_BYTES}
-
-
-def escape(data: bytes) -> bytes:
-    """API-mode-2 escaping of the bytes after the start delimiter."""
-    if _SPECIAL_RE.search(data) is None:
-        return data
-    return _SPECIAL_RE.sub(lambda m: _ESCAPED[m.group()[0]], data)
-
-
-def encode(msg: Message) -> bytes:
-    """The escaped frame of a message.
-
-    Raises
-    ------
-    ProtocolError
-        A field does not fit its wire type (e.g. PWM above 1023, seq above 65535,
-        a float beyond float32 range).
-    """
-    try:
-        payload = msg.pack()
-    except (struct.error, OverflowError) as exc:
-        raise ProtocolError(f"{type(msg).__name__}: {exc}") from None
-    data = bytes((msg.TYPE,)) + payload
-    n = len(data)
-    checksum = 0xFF - (sum(data) & 0xFF)
-    return bytes((START,)) + escape(bytes((n >> 8, n & 0xFF)) + data + bytes((checksum,)))
-
-
-@dataclass
-class DecoderCounters:
-    """What a :class:`RigDecoder` accepted and dropped.
-
-    Attributes
-    ----------
-    frames : int
-        Valid messages returned.
-    checksum_errors : int
-        Complete frames whose checksum did not match.
-    length_errors : int
-        Length field 0 or above :data:`MAX_FRAME_DATA`, or a payload too long / too
-        short for its type (checksum good).
-    unknown_types : int
-        Good frames of a type this decoder does not accept.
-    invalid_values : int
-        Good frames with an impossible field (PWM above 1023, unknown state or result).
-    truncated_frames : int
-        Frames cut short by a new start delimiter.
-    discarded_bytes : int
-        Bytes skipped while hunting for a start delimiter.
-    """
-
-    frames: int = 0
-    checksum_errors: int = 0
-    length_errors: int = 0
-    unknown_types: int = 0
-    invalid_values: int = 0
-    truncated_frames: int = 0
-    discarded_bytes: int = 0
-
-    @property
-    def errors(self) -> int:
-        """Frames dropped for any reason."""
-        return (self.checksum_errors + self.length_errors + self.unknown_types + self.invalid_values
-                + self.truncated_frames)
-
-    def as_dict(self) -> dict[str, int]:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
-
-
-_HUNT, _FRAME = 0, 1
-
-
-class RigDecoder:
-    """Incremental decoder of the byte stream; never raises on any bytes.
-
-    Parameters
-    ----------
-    accept : iterable of message classes or None
-        Types to return (e.g. :data:`TO_PC` on the ground station); other types,
-        known or not, count as ``unknown_types``.  None: all.
-    max_frame_data : int
-        Largest accepted length field [bytes].
-
-    Notes
-    -----
-    Escapes split across :meth:`feed` calls are handled.  A checksum, length or
-    value error drops the frame and the decoder hunts for the next unescaped
-    0x7E; an unescaped 0x7E inside a frame aborts it (``truncated_frames``) and
-    starts a new one, so the frame after any garbage is decoded.
-    """
-
-    def __init__(self, accept: Iterable[type[_Message]] | None = None, max_frame_data: int = MAX_FRAME_DATA) -> None:
-        classes = MESSAGE_TYPES.values() if accept is None else accept
-        self._types: dict[int, type[_Message]] = {c.TYPE: c for c in classes}
-        self._max = int(max_frame_data)
-        self.counters = DecoderCounters()
-        self._state = _HUNT
-        self._esc = False
-        self._buf = bytearray()
-        self._need = 2
-
-    def reset(self) -> None:
-        """Forget a partial frame (counters are kept)."""
-        self._state = _HUNT
-        self._esc = False
-        self._buf.clear()
-
-    def _start(self) -> None:
-        self._state = _FRAME
-        self._esc = False
-        self._buf.clear()
-        self._need = 2  # the length field first
-
-    def feed(self, data: bytes | bytearray | memoryview) -> list[Message]:
-        """Messages completed by ``data`` (in order)."""
-        out: list[Message] = []
-        data = bytes(data)
-        n = len(data)
-        i = 0
-        buf = self._buf
-        c = self.counters
-        while i < n:
-            if self._state == _HUNT:
-                j = data.find(START, i)
-                if j < 0:
-                    c.discarded_bytes += n - i
-                    break
-                c.discarded_bytes += j - i
-                i = j + 1
-                self._start()
-                continue
-            b = data[i]
-            if b == START:
-                c.truncated_frames += 1
-                i += 1
-                self._start()
-                continue
-            if self._esc:
-                self._esc = False
-                buf.append(b ^ XOR)
-                i += 1
-            elif b == ESCAPE:
-                self._esc = True
-                i += 1
-                continue
-            else:
-                # Copy the run of plain bytes up to what the frame still needs.
-                end = min(n, i + self._need - len(buf))
-                k = data.find(START, i, end)
-                if k >= 0:
-                    end = k
-                k = data.find(ESCAPE, i, end)
-                if k >= 0:
-                    end = k
-                buf += data[i:end]
-                i = end
-            if len(buf) < self._need:
-                continue
-            if self._need == 2:
-                length = (buf[0] << 8) | buf[1]
-                if length == 0 or length > self._max:
-                    c.length_errors += 1
-                    self._state = _HUNT
-                    continue
-                self._need = 3 + length
-                continue
-            msg = self._finish(buf)
-            self._state = _HUNT
-            if msg is not None:
-                out.append(msg)
-        return out
-
-    def _finish(self, buf: bytearray) -> Message | None:
-        c = self.counters
-        if sum(buf[2:]) & 0xFF != 0xFF:
-            c.checksum_errors += 1
-            return None
-        cls = self._types.get(buf[2])
-        if cls is None:
-            c.unknown_types += 1
-            return None
-        if len(buf) - 4 != cls.STRUCT.size:
-            c.length_errors += 1
-            return None
-        try:
-            msg = cls.unpack(bytes(buf[3:-1]))
-        except ValueError:
-            c.invalid_values += 1
-            return None
-        c.frames += 1
-        return msg  # type: ignore[return-value]

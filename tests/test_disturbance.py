@@ -1,0 +1,170 @@
+"""The disturbance observer (gcs/estimate.py) and the laws' compensation of a disturbance acceleration."""
+
+import math
+
+import numpy as np
+import pytest
+
+from gcs.config import load_config
+from gcs.control import NO_DISTURBANCE, make_controller
+from gcs.estimate import DisturbanceObserver, StateEstimator
+from gcs.model import ModelParams, disturbance_tilt
+from quadrotor.dynamics import eq1_acceleration
+from quadrotor.state import Command, State
+
+MODEL = ModelParams(1.0, 9.81)
+TS = 0.01
+
+
+def hover_flight(d_true, seconds, *, observer, z0=1.5, vel_bias=(0.0, 0.0, 0.0), thrust_n=9.81, start_z=None):
+    """A point mass at hover thrust pushed by ``d_true``, measured every tick in position and (biased) velocity."""
+    est = StateEstimator(TS, MODEL, (0.05,) * 3, 2.0, ground_z_m=None)
+    est.disturbance = observer
+    if observer is not None and observer.ground_z_m is None:
+        observer.ground_z_m = 0.0   # it took off from z = 0
+    p = [0.0, 0.0, z0 if start_z is None else start_z]
+    v = [0.0, 0.0, 0.0]
+    cmd = Command(thrust_n, 0.0, 0.0, 0.0)
+    a = eq1_acceleration(thrust_n, 0.0, 0.0, 9.81)
+    for k in range(int(seconds / TS)):
+        if k:
+            est.predict(TS, cmd)
+        for i in range(3):
+            v[i] += (a[i] + d_true[i]) * TS
+            p[i] += v[i] * TS
+        est.correct_position(tuple(p), (0.05 ** 2,) * 3)
+        est.correct_velocity(tuple(vi + b for vi, b in zip(v, vel_bias)), (0.05 ** 2,) * 3)
+    return est, p, v
+
+
+def test_the_observer_converges_to_a_steady_disturbance():
+    d = (0.1, -0.2, 0.6)
+    est, p, v = hover_flight(d, 25.0, observer=DisturbanceObserver(2.0))
+    assert est.disturbance.value == pytest.approx(list(d), abs=0.01)
+    s = est.state()
+    assert (s.vx, s.vy, s.vz) == pytest.approx(tuple(v), abs=0.02)   # the filters (at 15 m/s) follow it
+
+
+def test_the_observer_converges_with_its_time_constant():
+    obs = DisturbanceObserver(2.0)
+    hover_flight((0.0, 0.0, 0.5), 2.0, observer=obs)
+    # dd/dt = (d_true - d) / tau_d: about 1 - 1/e after one time constant (the filters' own lag aside)
+    assert 0.4 * 0.5 < obs.value[2] < 0.8 * 0.5
+
+
+def test_the_observer_does_not_learn_on_the_ground_nor_at_idle():
+    obs = DisturbanceObserver(2.0)
+    obs.ground_z_m = 0.0
+    hover_flight((0.0, 0.0, 9.81), 10.0, observer=obs, thrust_n=0.0, z0=0.0)   # the ground holds it up
+    assert obs.value == [0.0, 0.0, 0.0] and not obs.learning
+    obs = DisturbanceObserver(2.0)
+    obs.gate(0.0, 9.81, 9.81)
+    obs.gate(0.2, 9.81, 9.81)
+    assert not obs.learning               # 0.2 m above the lowest altitude seen: not yet airborne
+    obs.gate(0.31, 9.81, 9.81)
+    assert obs.learning
+    obs.gate(1.0, 3.0, 9.81)
+    assert not obs.learning               # idle thrust: not flying
+
+
+def test_the_estimate_is_clipped():
+    obs = DisturbanceObserver(1.0, max_m_s2=0.5)
+    hover_flight((2.0, 0.0, 0.0), 10.0, observer=obs)
+    assert obs.value[0] == pytest.approx(0.5)
+
+
+def test_drag_is_modelled_not_estimated():
+    obs = DisturbanceObserver(2.0, drag_1_s=0.25)
+    obs.value = [0.1, 0.0, 0.0]
+    assert obs.acceleration((0.4, -0.2, 0.0)) == pytest.approx((0.0, 0.05, 0.0))
+
+
+def test_a_velocity_reading_offset_is_removed():
+    """LOCAL_POSITION_NED's velocity off its position's derivative by 2 cm/s: the offset is estimated and
+    the estimate's velocity follows the positions (no drift for a weak position loop to turn into error)."""
+    bias = (0.02, -0.02, 0.0)
+    obs = DisturbanceObserver(2.0, velocity_bias_time_constant_s=2.0)
+    est, p, v = hover_flight((0.0, 0.0, 0.0), 20.0, observer=obs, vel_bias=bias)
+    assert obs.velocity_bias == pytest.approx(list(bias), abs=2e-3)
+    s = est.state()
+    assert (s.vx, s.vy) == pytest.approx((v[0], v[1]), abs=2e-3)
+    assert obs.value == pytest.approx([0.0, 0.0, 0.0], abs=0.01)     # and it is not taken for a disturbance
+    plain, _, _ = hover_flight((0.0, 0.0, 0.0), 20.0, observer=None, vel_bias=bias)
+    assert abs(plain.state().vx - v[0]) > 0.01                        # without it the estimate keeps the offset
+
+
+def test_without_an_observer_the_estimator_reports_no_disturbance():
+    est, _, _ = hover_flight((0.3, 0.0, 0.0), 2.0, observer=None)
+    assert est.disturbance_m_s2() == (0.0, 0.0, 0.0)
+    assert StateEstimator(TS, MODEL, (0.05,) * 3, 2.0).disturbance_m_s2() == (0.0, 0.0, 0.0)
+
+
+def test_bad_observer_parameters_are_refused():
+    for kw in ({"time_constant_s": 0.0}, {"time_constant_s": 1.0, "drag_1_s": -1.0},
+               {"time_constant_s": 1.0, "velocity_bias_time_constant_s": 0.0}):
+        with pytest.raises(ValueError):
+            DisturbanceObserver(**kw)
+
+
+# ---------------------------------------------------------------------- the laws
+
+def test_disturbance_tilt_balances_eq1():
+    u = 10.0
+    phi, th = disturbance_tilt(u, 1.0, 9.81, 0.3, -0.2)
+    ax, ay, _ = eq1_acceleration(u, phi, th, 9.81)
+    assert (ax + 0.3, ay - 0.2) == pytest.approx((0.0, 0.0), abs=1e-12)
+    assert disturbance_tilt(u, 1.0, 9.81, 0.0, 0.0) == (0.0, 0.0)
+    assert math.sin(disturbance_tilt(u, 1.0, 9.81, 100.0, 0.0)[1]) == pytest.approx(0.5)   # clipped at 30 deg
+
+
+@pytest.mark.parametrize("name", ["nlsoc", "nlsoc-literal", "loc", "pd"])
+def test_zero_disturbance_changes_nothing(name):
+    cfg = load_config("outdoor-circle")
+    a, b = make_controller(name, cfg), make_controller(name, cfg)
+    rng = np.random.default_rng(3)
+    for k in range(50):
+        s = State(*rng.normal(0.0, 0.2, 12))
+        r = State(*rng.normal(0.0, 0.2, 12))
+        assert a.step(k, s, r) == b.step(k, s, r, disturbance_m_s2=NO_DISTURBANCE)
+
+
+@pytest.mark.parametrize("name", ["nlsoc", "loc", "pd"])
+def test_at_the_set_point_the_laws_hold_it_against_the_disturbance(name):
+    """At the reference, tilted as the disturbance needs: thrust m (g - d_z) / cos, no angular acceleration."""
+    cfg = load_config("outdoor-circle")
+    ctl = make_controller(name, cfg)
+    d = (0.15, -0.1, 0.6)
+    thrust = 9.81 - 0.6
+    for _ in range(3):   # the tilt depends on the thrust and the thrust on the tilt: iterate
+        phi, th = disturbance_tilt(thrust, 1.0, 9.81, d[0], d[1])
+        thrust = (9.81 - 0.6) / (math.cos(phi) * math.cos(th))
+    s = State(z=1.5, roll=phi, pitch=th)
+    cmd = ctl.step(100, s, State(z=1.5), disturbance_m_s2=d)
+    assert cmd.thrust_n == pytest.approx(thrust, rel=1e-6)
+    assert (cmd.roll_accel_rad_s2, cmd.pitch_accel_rad_s2) == pytest.approx((0.0, 0.0), abs=1e-6)
+    acc = eq1_acceleration(cmd.thrust_n, phi, th, 9.81)
+    assert [a + di for a, di in zip(acc, d)] == pytest.approx([0.0, 0.0, 0.0], abs=1e-9)
+
+
+@pytest.mark.parametrize("name", ["nlsoc", "loc", "pd"])
+def test_compensated_the_closed_loop_has_no_steady_error(name):
+    """Eq. 1 plus a constant disturbance, flown for 40 s: with the disturbance given the error vanishes."""
+    cfg = load_config("outdoor-altitude")
+    d = (0.1, -0.1, 0.6)
+
+    def fly(dist):
+        ctl = make_controller(name, cfg)
+        x = np.array([0.0, 0.0, 1.0] + [0.0] * 9)
+        ref = State(z=1.0)
+        for k in range(4000):
+            c = ctl.step(k, State(*x), ref, disturbance_m_s2=dist)
+            a = eq1_acceleration(c.thrust_n, x[6], x[7], 9.81)
+            acc = np.r_[np.add(a, d), [c.roll_accel_rad_s2, c.pitch_accel_rad_s2, c.yaw_accel_rad_s2]]
+            x[3:6] += acc[:3] * TS
+            x[9:12] += acc[3:] * TS
+            x[0:3] += x[3:6] * TS
+            x[6:9] += x[9:12] * TS
+        return np.abs(x[:3] - [0.0, 0.0, 1.0])
+
+    assert fly(d).max() < 0.01
+    assert fly(NO_DISTURBANCE).max() > 0.03
