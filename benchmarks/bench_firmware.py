@@ -24,16 +24,15 @@ from pathlib import Path
 
 from benchlib import document, emit, met_text, row
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from gcs.vehicles.arducopter_sitl import ENV_VAR, locate_arducopter
+
 ROOT = Path(__file__).resolve().parents[1]
-ENV_VAR = "GCS_ARDUCOPTER"
 RELIABLE_SKIPPED = 0.01
 
 
 def binary() -> str | None:
-    for c in (os.environ.get(ENV_VAR), str(ROOT.parent / "shared" / "arducopter")):
-        if c and ((Path(c) / "arducopter").is_file() or Path(c).is_file()):
-            return c
-    return None
+    return locate_arducopter(ROOT.parent / "shared" / "arducopter")
 
 
 def fly(speedup: float, arducopter: str) -> dict:

@@ -28,7 +28,7 @@ from pathlib import Path
 
 from gcs.link.mavlink import LinkError
 
-__all__ = ["ENV_VAR", "HOME", "ArduCopterSitl", "find_arducopter"]
+__all__ = ["ENV_VAR", "HOME", "ArduCopterSitl", "find_arducopter", "locate_arducopter"]
 
 #: Environment variable naming the ArduCopter SITL binary (or its directory).
 ENV_VAR = "GCS_ARDUCOPTER"
@@ -56,6 +56,19 @@ def find_arducopter(path: str | os.PathLike | None) -> Path:
     if not (p.is_file() and os.access(p, os.X_OK)):
         raise LinkError(f"{p}: not an executable ArduCopter SITL binary (from {'--arducopter' if path else ENV_VAR})")
     return p.resolve()
+
+
+def locate_arducopter(*fallbacks: str | os.PathLike) -> str | None:
+    """The binary as :func:`find_arducopter` finds it from :data:`ENV_VAR`, else the first of ``fallbacks``
+    that holds one (as a string); None without one (tests and benchmarks skip then)."""
+    for candidate in (os.environ.get(ENV_VAR), *fallbacks):
+        if not candidate:
+            continue
+        try:
+            return str(find_arducopter(candidate))
+        except LinkError:
+            continue
+    return None
 
 
 def _port_free(port: int) -> bool:

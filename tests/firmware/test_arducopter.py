@@ -20,11 +20,10 @@ from pathlib import Path
 import pytest
 
 from gcs.log.mcap.reader import read_log
-from gcs.vehicles.arducopter_sitl import ENV_VAR, ArduCopterSitl
+from gcs.vehicles.arducopter_sitl import ENV_VAR, ArduCopterSitl, locate_arducopter
 
 ROOT = Path(__file__).resolve().parents[2]
-_CANDIDATES = [os.environ.get(ENV_VAR), str(ROOT.parent / "shared" / "arducopter")]
-BINARY = next((c for c in _CANDIDATES if c and ((Path(c) / "arducopter").is_file() or Path(c).is_file())), None)
+BINARY = locate_arducopter(ROOT.parent / "shared" / "arducopter")
 pytestmark = pytest.mark.skipif(BINARY is None, reason=f"no ArduCopter SITL binary (${ENV_VAR} unset, "
                                                        f"{ROOT.parent / 'shared' / 'arducopter'} absent)")
 #: Vehicle seconds per wall second in flight: reliable on a busy 2-core machine (benchmarks/bench_firmware.py).
