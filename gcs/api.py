@@ -42,6 +42,8 @@ from gcs.mission import Mission
 from gcs.sim import ExperimentResult, SimOptions, run_experiment
 from gcs.vehicles.arducopter_sitl import ArduCopterSitl
 from gcs.vehicles.embedded import EmbeddedRig, EmbeddedSitl
+from gcs.vehicles.px4_events import EventMetadata, find_event_metadata
+from gcs.vehicles.px4_sitl import Px4Sitl
 from gcs.vehicles.mavlink import MavlinkSession
 from gcs.vehicles.rig import RigSession
 from quadrotor.clock import MonotonicClock
@@ -140,6 +142,7 @@ def _open_vehicle(spec: FlightSpec, config: Config, console: Callable[[str], Non
     """``(session, link, child)``: the link to the vehicle (and the child simulator behind it, stopped again
     should anything after its start fail)."""
     child = None
+    events = None
     try:
         if spec.vehicle == "rig":
             baud = spec.baud or 115200
@@ -160,6 +163,15 @@ def _open_vehicle(spec: FlightSpec, config: Config, console: Callable[[str], Non
             link.alive_check = child.check_alive
             console(f"[link] ArduCopter SITL {child.binary} on {child.url} (booting at speed-up {child.speedup:g}), "
                     f"its log {child.log_path}")
+        elif spec.firmware == "px4":
+            # SIH runs at PX4_SIM_SPEED_FACTOR from boot (PX4 is ready within seconds).
+            child = Px4Sitl(spec.firmware_path, speedup=spec.speedup or 1.0).start()
+            link = MavlinkLink(child.url, target_system=child.instance + 1, target_component=spec.target_component,
+                               signing_key=spec.signing_key)
+            link.alive_check = child.check_alive
+            events = _px4_events(child.events_path, console)
+            console(f"[link] PX4 SITL + SIH {child.build} instance {child.instance} on {child.url} "
+                    f"(speed factor {child.speedup:g}), its log {child.log_path}")
         elif spec.builtin:
             link = MavlinkLink("udpin:127.0.0.1:0", target_system=spec.target_system,
                                target_component=spec.target_component, signing_key=spec.signing_key)
@@ -170,16 +182,31 @@ def _open_vehicle(spec: FlightSpec, config: Config, console: Callable[[str], Non
         else:
             link = MavlinkLink(spec.port or spec.connect, baud=spec.baud or 57600, target_system=spec.target_system,
                                target_component=spec.target_component, signing_key=spec.signing_key)
+        if events is None and spec.firmware != "px4":
+            found = find_event_metadata()
+            events = _px4_events(found, console) if found is not None else None
         session = MavlinkSession(config, link, output=spec.output,
                                  vehicle_alive=child.exit_reason if child is not None else None,
                                  speedup=(spec.speedup or 1.0) if spec.paced else None,
                                  ready_timeout_s=spec.ready_timeout_s,
-                                 boot_speedup=child.speedup if spec.firmware is not None else None)
+                                 boot_speedup=child.speedup if spec.firmware == "arducopter" else None,
+                                 event_metadata=events)
         return session, link, child
     except BaseException:
         if child is not None:
             child.stop()
         raise
+
+
+def _px4_events(path, console: Callable[[str], None]) -> EventMetadata | None:
+    """PX4's event metadata from ``path`` (None, said, when it cannot be read: refusals then say "an event")."""
+    try:
+        meta = EventMetadata.load(path)
+    except (OSError, ValueError, EOFError) as exc:
+        console(f"[link] PX4 event metadata not read ({exc}): arming refusals will name event ids only")
+        return None
+    console(f"[link] PX4 event metadata: {len(meta)} events from {path}")
+    return meta
 
 
 def _fly_logged(spec: FlightSpec, config: Config, recorder: FlightRecorder, console, interrupts: Interrupts

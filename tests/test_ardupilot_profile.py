@@ -8,7 +8,8 @@ import pytest
 
 from gcs.errors import PreflightRefused
 from gcs.link.mavlink import LinkError
-from gcs.vehicles.ardupilot import FS_GCS_LAND, FS_GCS_TIMEOUT_S, GUID_TIMEOUT_S, ArduPilotProfile, OutputParams
+from gcs.vehicles.ardupilot import FS_GCS_LAND, FS_GCS_TIMEOUT_S, GUID_TIMEOUT_S, ArduPilotProfile
+from gcs.vehicles.profile import OutputParams
 from gcs.vehicles.firmware import BUILTIN_SITL_MARK, CAP_SET_ACTUATOR_TARGET, CAP_SET_ATTITUDE_TARGET, Firmware
 from gcs.vehicles.params import VehicleParams
 

@@ -72,7 +72,7 @@ def test_ready_timeout_out_of_range_is_refused(capsys, value):
 
 def test_unknown_sitl_is_refused(capsys):
     with pytest.raises(SystemExit) as e:
-        main(["fly", "--sitl", "px4", "--no-log"])
+        main(["fly", "--sitl", "inav", "--no-log"])
     assert e.value.code == 2
     assert "--sitl" in stderr_line(capsys)
 
@@ -80,6 +80,8 @@ def test_unknown_sitl_is_refused(capsys):
 # --------------------------------------------------------------------------- combinations (ConfigError: exit 2)
 @pytest.mark.parametrize(("argv", "names"), [
     (["--arducopter", "/opt/ardupilot/arducopter"], ["--arducopter", "only with --sitl arducopter"]),
+    (["--px4", "/opt/px4"], ["--px4", "only with --sitl px4"]),
+    (["--sitl", "arducopter", "--px4", "/opt/px4"], ["--px4"]),
     (["--sitl", "lockstep", "--arducopter", "/opt/ac"], ["--arducopter"]),
     (["--connect", "tcp:127.0.0.1:5760", "--arducopter", "/opt/ac"], ["--arducopter"]),
     (["--sitl", "arducopter", "--connect", "tcp:127.0.0.1:5760"], ["--sitl", "--connect"]),
@@ -100,7 +102,7 @@ def test_bad_combinations_are_refused_before_anything_opens(capsys, argv, names)
 
 def test_flightspec_refuses_another_firmware():
     with pytest.raises(ConfigError, match="firmware SITL must be one of arducopter"):
-        FlightSpec(firmware="px4")
+        FlightSpec(firmware="inav")
 
 
 @pytest.mark.parametrize("kw", [

@@ -7,7 +7,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.config import load_config
 from gcs.control import make_controller
-from gcs.vehicles.ardupilot import OutputParams, angle_accel_limits
+from gcs.vehicles.ardupilot import angle_accel_limits
+from gcs.vehicles.profile import OutputParams
 from gcs.vehicles.output import (IGNORE_ATTITUDE, IGNORE_RATES, OutputAdapter, OutputModel, angle_for_rate,
                                  build_adapter, rotation_quaternion)
 from quadrotor.frames import euler_rates_to_body_rates, euler_to_quaternion, quat_multiply, quat_rotate, rotation_vector

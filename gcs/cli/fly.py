@@ -17,6 +17,7 @@ from gcs.flight.result import EXIT_CODES, FlightResult
 from gcs.link.keys import read_signing_key
 from gcs.report import format_table
 from gcs.vehicles.arducopter_sitl import ENV_VAR as ARDUCOPTER_ENV
+from gcs.vehicles.px4_sitl import ENV_VAR as PX4_ENV
 from gcs.vehicles.output import OUTPUTS
 from quadrotor.errors import ConfigError
 
@@ -59,13 +60,18 @@ def add_fly_parser(sub) -> None:
     f.add_argument("--force-budget", action="store_true", help="fly even when the serial link budget does not fit")
     f.add_argument("--sitl", choices=("realtime", "lockstep", *FIRMWARE_SITLS), default="realtime",
                    help="the child vehicle when no port/connection is given: the built-in SITL in real time "
-                        "(default) or lockstep, or 'arducopter': ArduPilot's own ArduCopter SITL (the real firmware; "
-                        f"--arducopter PATH or ${ARDUCOPTER_ENV})")
+                        "(default) or lockstep, or a real firmware's SITL: 'arducopter' (ArduPilot's ArduCopter SITL; "
+                        f"--arducopter PATH or ${ARDUCOPTER_ENV}) or 'px4' (PX4 SITL with SIH; --px4 PATH or "
+                        f"${PX4_ENV})")
     f.add_argument("--arducopter", metavar="PATH", default=None,
                    help=f"the ArduCopter SITL binary or its directory (default ${ARDUCOPTER_ENV})")
+    f.add_argument("--px4", metavar="PATH", default=None,
+                   help=f"the PX4 SITL build: a folder with bin/px4 and etc/, its bin/px4, or a .tar.gz of it "
+                        f"(default ${PX4_ENV})")
     f.add_argument("--speedup", type=float_range(0.1, 50.0), default=None, metavar="S",
-                   help="a firmware SITL's speed-up (simulated s per wall s): started so with --sitl arducopter, or "
-                        "how a SITL at --connect was started; the flight then runs on the vehicle's clock")
+                   help="a firmware SITL's speed-up (simulated s per wall s): started so with --sitl "
+                        "arducopter/px4, or how a SITL at --connect was started; the flight then runs on the "
+                        "vehicle's clock")
     f.add_argument("--ready-timeout", type=float_range(1.0, 3600.0), default=60.0, metavar="S",
                    help="vehicle seconds to wait for the vehicle to become ready (EKF, telemetry) and to accept "
                         "arming (default 60)")
@@ -98,10 +104,14 @@ def spec_from_args(args: argparse.Namespace, command_line: str = "") -> FlightSp
         raise ConfigError("--sitl", args.sitl, "starts the firmware as the child vehicle: not with --port/--connect")
     if args.arducopter is not None and firmware != "arducopter":
         raise ConfigError("--arducopter", args.arducopter, "only with --sitl arducopter")
+    if args.px4 is not None and firmware != "px4":
+        raise ConfigError("--px4", args.px4, "only with --sitl px4")
     return FlightSpec(
         controller=args.controller, config=args.config, vehicle="rig" if args.rig else "mavlink", port=args.port,
         connect=args.connect, baud=args.baud, lockstep=(args.sitl == "lockstep") if builtin else bool(args.lockstep),
-        firmware=firmware, firmware_path=args.arducopter, speedup=args.speedup, ready_timeout_s=args.ready_timeout,
+        firmware=firmware,
+        firmware_path=args.arducopter if firmware == "arducopter" else args.px4, speedup=args.speedup,
+        ready_timeout_s=args.ready_timeout,
         seed=args.seed, sitl_args=tuple(args.sitl_arg), target_system=args.target_system,
         target_component=args.target_component,
         signing_key=read_signing_key(args.signing_key) if args.signing_key else None, output=args.output,

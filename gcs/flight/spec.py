@@ -16,7 +16,9 @@ DEFAULT_RIG_CONFIG = "indoor-4dof"
 #: ``mavlink``: an autopilot on ``port``/``connect``, or the built-in SITL without either; ``rig``: the 4-DOF rig.
 VEHICLES = ("mavlink", "rig")
 #: Real firmware that ``gcs fly --sitl NAME`` can start as its child vehicle.
-FIRMWARE_SITLS = ("arducopter",)
+FIRMWARE_SITLS = ("arducopter", "px4")
+#: The option naming each firmware SITL's path.
+FIRMWARE_PATH_OPTION = {"arducopter": "--arducopter", "px4": "--px4"}
 
 
 @dataclass(frozen=True)
@@ -33,9 +35,10 @@ class FlightSpec:
     port, connect : str or None
         A serial device, or a pymavlink URL (``udpin:``, ``udpout:``, ``tcp:``); neither: the built-in
         SITL (or the rig emulator, or with ``firmware``, a firmware SITL) as a child process.
-    firmware : {"arducopter"} or None
-        Without port and URL: fly ArduPilot's own ArduCopter SITL (the real firmware) as the child
-        vehicle, found at ``firmware_path`` or the ``GCS_ARDUCOPTER`` environment variable.
+    firmware : {"arducopter", "px4"} or None
+        Without port and URL: fly a real firmware's SITL as the child vehicle — ArduPilot's own
+        ArduCopter SITL, or PX4 SITL with its simulator SIH — found at ``firmware_path`` or the
+        ``GCS_ARDUCOPTER`` / ``GCS_PX4`` environment variable.
     firmware_path : str or None
     speedup : float or None
         The vehicle's simulated time runs this many times faster than the wall (``firmware`` started
@@ -102,7 +105,7 @@ class FlightSpec:
         if self.speedup is not None and not 0.1 <= self.speedup <= 50.0:
             raise ConfigError("--speedup", str(self.speedup), "must be in 0.1..50")
         if self.speedup is not None and self.firmware is None and self.connect is None:
-            raise ConfigError("--speedup", str(self.speedup), "only for a firmware SITL (--sitl arducopter, or "
+            raise ConfigError("--speedup", str(self.speedup), "only for a firmware SITL (--sitl arducopter/px4, or "
                                                               "--connect to one started with that speed-up)")
         if not 1.0 <= self.ready_timeout_s <= 3600.0:
             raise ConfigError("--ready-timeout", str(self.ready_timeout_s), "must be in 1..3600 s")
@@ -154,7 +157,8 @@ class FlightSpec:
                 ("--speedup", self.speedup), ("--ready-timeout", None if self.ready_timeout_s == 60.0
                                               else self.ready_timeout_s))
         if self.firmware is not None:
-            out += ["--sitl", self.firmware] + (["--arducopter", self.firmware_path] if self.firmware_path else [])
+            out += ["--sitl", self.firmware] + ([FIRMWARE_PATH_OPTION[self.firmware], self.firmware_path]
+                                                if self.firmware_path else [])
         elif self.builtin:
             out += ["--sitl", "lockstep" if self.lockstep else "realtime", "--seed", str(self.seed)]
             out += [f"--sitl-arg={a}" for a in self.sitl_args]

@@ -106,7 +106,13 @@ def _command_long(lim: GuardLimits, m) -> str | None:
     return None
 
 
+#: MAV_PARAM_TYPE UINT8..INT32: the value may travel bytewise (PX4), a negative integer as a NaN pattern.
+_INT_PARAM_TYPES = frozenset(range(1, 7))
+
+
 def _param_set(lim: GuardLimits, m) -> str | None:
+    if m.param_type in _INT_PARAM_TYPES:
+        return None
     return None if math.isfinite(m.param_value) else "non-finite value"
 
 

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import errno
 import os
-import struct
 import time
 from dataclasses import dataclass, field
 from collections.abc import Callable, Iterable
@@ -37,7 +36,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from gcs.errors import GcsError
 from gcs.link.guard import OutputGuard, UnsafeCommand
 from gcs.link.base import MessageWaiter
-from quadrotor.mavlink.framing import parse_bytes, reset_parser
+from gcs.link.param_encoding import ParamEncodingError, decode_param, encode_param, same_float32
+from quadrotor.mavlink.framing import parse_bytes, reset_parser, restore_unknown_header
 from quadrotor.mavlink.signing import SignatureCheck, setup_signing
 
 mavutil.set_dialect("ardupilotmega")
@@ -126,6 +126,11 @@ class MavlinkLink(MessageWaiter):
             self.signature_check = setup_signing(self.mav, signing_key, allow_unsigned_callback=self._allow_unsigned)
         self.last_heartbeat = None
         self.vehicle_addr = None
+        #: Integer parameters travel bytewise in PARAM_VALUE/PARAM_SET (PX4; the autopilot's
+        #: MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE), else as C-cast floats (ArduPilot).
+        self.param_bytewise = False
+        #: name -> MAV_PARAM_TYPE, as the vehicle last reported it.
+        self.param_types: dict[str, int] = {}
         self._udp = isinstance(self.conn, mavutil.mavudp)
 
     # ------------------------------------------------------------------ receive
@@ -136,6 +141,7 @@ class MavlinkLink(MessageWaiter):
     def _accept(self, msg, addr=None) -> bool:
         c = self.counters
         t = msg.get_type()
+        restore_unknown_header(msg)
         if t == "BAD_DATA":
             if getattr(msg, "reason", "") == "Invalid signature":
                 data = bytes(getattr(msg, "data", b"") or b"")
@@ -322,30 +328,44 @@ class MavlinkLink(MessageWaiter):
                                  on_message=on_message)
 
     def param_get(self, name: str, timeout_s: float = 3.0, retries: int = 2, on_message=None) -> float:
-        """PARAM_REQUEST_READ -> PARAM_VALUE."""
+        """PARAM_REQUEST_READ -> PARAM_VALUE (decoded per its type: :meth:`param_value`)."""
         for _ in range(retries + 1):
             self.send(self.mav.param_request_read_encode(self.target_system, self.target_component, name.encode(), -1))
             pv = self.wait(lambda m: m.get_type() == "PARAM_VALUE" and _param_id(m) == name, timeout_s, on_message)
             if pv is not None:
-                return float(pv.param_value)
+                return self.param_value(pv)
         raise LinkError(f"no PARAM_VALUE for {name} after {retries + 1} tries")
+
+    def param_value(self, pv) -> float:
+        """The value a PARAM_VALUE carries (its type remembered for :meth:`param_set`)."""
+        ptype = int(pv.param_type)
+        self.param_types[_param_id(pv)] = ptype
+        return decode_param(float(pv.param_value), ptype, self.param_bytewise)
 
     def param_set(self, name: str, value: float, timeout_s: float = 3.0, retries: int = 2, on_message=None) -> float:
         """PARAM_SET, confirmed by a PARAM_VALUE that carries the value set; returns the value the vehicle holds.
 
-        A PARAM_VALUE with another value may be a stale or duplicated one sent before our
-        PARAM_SET: it is not taken as the answer.  When only such values come back, the
-        parameter is read once more and what the vehicle reports is returned (the caller
-        decides whether that is a refusal).
+        The value goes with the parameter's own type as the vehicle reported it (integers
+        bytewise where the autopilot encodes them so: an autopilot such as PX4 ignores a REAL32
+        PARAM_SET of an INT32 parameter); a parameter never read goes as REAL32.  A PARAM_VALUE
+        with another value may be a stale or duplicated one sent before our PARAM_SET: it is
+        not taken as the answer.  When only such values come back, the parameter is read once
+        more and what the vehicle reports is returned (the caller decides whether that is a refusal).
         """
-        seen: float | None = None
+        # C-cast autopilots (ArduPilot) take every value as REAL32 and convert to their own type.
+        ptype = self.param_types.get(name, mavlink.MAV_PARAM_TYPE_REAL32) if self.param_bytewise \
+            else mavlink.MAV_PARAM_TYPE_REAL32
+        try:
+            wire = encode_param(value, ptype, self.param_bytewise)
+        except ParamEncodingError as exc:
+            raise LinkError(f"{name}: {exc}") from None
+        want = decode_param(wire, ptype, self.param_bytewise)
         for _ in range(retries + 1):
-            self.send(self.mav.param_set_encode(self.target_system, self.target_component, name.encode(), float(value),
-                                                mavlink.MAV_PARAM_TYPE_REAL32))
+            self.send(self.mav.param_set_encode(self.target_system, self.target_component, name.encode(), wire, ptype))
             pv = self.wait(lambda m: m.get_type() == "PARAM_VALUE" and _param_id(m) == name
-                           and _same_float32(m.param_value, value), timeout_s, on_message)
+                           and same_float32(self.param_value(m), want), timeout_s, on_message)
             if pv is not None:
-                return float(pv.param_value)
+                return self.param_value(pv)
         try:
             seen = self.param_get(name, timeout_s=timeout_s, retries=0, on_message=on_message)
         except LinkError:
@@ -364,15 +384,6 @@ class MavlinkLink(MessageWaiter):
 def _interval_us(rate_hz: float) -> int:
     """SET_MESSAGE_INTERVAL's interval [us] for a rate [Hz] (<= 0: stop the stream)."""
     return -1 if not rate_hz > 0 else max(1, int(round(1e6 / rate_hz)))
-
-
-def _same_float32(a: float, b: float) -> bool:
-    """Equal once both are rounded to float32 (PARAM_VALUE carries a float32)."""
-    pack = struct.Struct("<f")
-    try:
-        return pack.pack(a) == pack.pack(b)
-    except (OverflowError, struct.error):
-        return False
 
 
 def serial_errors() -> type[Exception]:

@@ -38,12 +38,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.errors import PreflightRefused
-from gcs.link.mavlink import LinkError
+from gcs.vehicles.profile import OutputParams, optional_param
 from quadrotor.mavlink.modes import COPTER_MODES, copter_mode_name
 
 __all__ = ["ArduPilotProfile", "OutputParams", "GUID_TIMEOUT_S", "FS_GCS_LAND", "FS_GCS_TIMEOUT_S",
@@ -69,42 +68,6 @@ def angle_accel_limits(acc_max_deg_s2: tuple[float, float, float]) -> tuple[floa
                  for a, (lo, hi) in zip(acc_max_deg_s2, bounds))
 
 
-@dataclass(frozen=True)
-class OutputParams:
-    """What the output adapters need from the autopilot (read, and set, by :meth:`ArduPilotProfile.configure`).
-
-    Attributes
-    ----------
-    hover_throttle : float
-        MOT_THST_HOVER.
-    angle_gain_1_s : (3,) float
-        ATC_ANG_RLL/PIT/YAW_P [1/s].
-    angle_accel_limit_rad_s2 : (3,) float
-        The angle loop's square-root limits (:func:`angle_accel_limits`; 0: linear).
-    rate_limit_rad_s : (3,) float
-        ATC_RATE_R/P/Y_MAX [rad/s] (0: none).
-    output : str or None
-        The output the parameters were set for (None: not yet; see
-        :meth:`ArduPilotProfile.configure_output`).
-    """
-
-    hover_throttle: float
-    angle_gain_1_s: tuple[float, float, float]
-    angle_accel_limit_rad_s2: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    rate_limit_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    output: str | None = None
-
-
-def _optional(params, name: str) -> float | None:
-    """A parameter the flight can do without: its value, or None when the vehicle has none (quietly)."""
-    params.check_interrupt()
-    try:
-        value = params.link.param_get(name, timeout_s=1.0, retries=1, on_message=params.on_message)
-    except LinkError:
-        return None
-    return value if math.isfinite(value) else None
-
-
 class ArduPilotProfile:
     """ArduCopter's conventions (see the module docstring)."""
 
@@ -114,6 +77,10 @@ class ArduPilotProfile:
     land_mode = COPTER_MODES["LAND"]
     #: Modes in which our setpoints steer the vehicle.
     control_modes = (COPTER_MODES["GUIDED_NOGPS"], COPTER_MODES["GUIDED"])
+    #: Setpoints need not flow before the flight mode is asked for.
+    stream_before_mode = False
+    #: ArduCopter's own failsafes land (FS_GCS, GUID_TIMEOUT levels): no mode it takes by itself needs landing.
+    hover_modes: tuple[int, ...] = ()
 
     @staticmethod
     def mode_name(custom_mode: int) -> str:
@@ -214,7 +181,7 @@ class ArduPilotProfile:
     @staticmethod
     def _guided_timeout(params) -> None:
         """GUID_TIMEOUT down to :data:`GUID_TIMEOUT_S` (never up)."""
-        old = _optional(params, "GUID_TIMEOUT")
+        old = optional_param(params, "GUID_TIMEOUT")
         if old is None:
             params.event("warning", "GUID_TIMEOUT not readable: a stalled link may leave the last setpoint acting")
         elif old > GUID_TIMEOUT_S + 1e-6:
@@ -227,14 +194,14 @@ class ArduPilotProfile:
     def _gcs_failsafe(params) -> None:
         """FS_GCS_ENABLE = Land and FS_GCS_TIMEOUT, once the vehicle is known to listen to our heartbeats."""
         ours = params.link.source_system
-        gcs_id = _optional(params, "MAV_GCS_SYSID")
+        gcs_id = optional_param(params, "MAV_GCS_SYSID")
         if gcs_id is None:
-            gcs_id = _optional(params, "SYSID_MYGCS")  # before ArduPilot 4.7
+            gcs_id = optional_param(params, "SYSID_MYGCS")  # before ArduPilot 4.7
         if gcs_id is not None and int(gcs_id) != ours:
             params.event("warning", f"MAV_GCS_SYSID is {int(gcs_id)}, not us ({ours}): the GCS failsafe would follow "
                                     "that ground station's heartbeats, not ours; FS_GCS_ENABLE left as it is")
             return
-        enable = _optional(params, "FS_GCS_ENABLE")
+        enable = optional_param(params, "FS_GCS_ENABLE")
         if enable is None:
             params.event("warning", "FS_GCS_ENABLE not readable: a dead ground station is not landed by the vehicle")
             return
@@ -243,7 +210,7 @@ class ArduPilotProfile:
             if int(new) != FS_GCS_LAND:
                 raise PreflightRefused(f"the vehicle did not accept FS_GCS_ENABLE = {FS_GCS_LAND} (Land)")
             params.said(f"FS_GCS_ENABLE {int(enable)} -> {FS_GCS_LAND} (no heartbeat from us: land)")
-        timeout = _optional(params, "FS_GCS_TIMEOUT")
+        timeout = optional_param(params, "FS_GCS_TIMEOUT")
         if timeout is not None and timeout > FS_GCS_TIMEOUT_S + 1e-6:
             new = params.set("FS_GCS_TIMEOUT", FS_GCS_TIMEOUT_S, timeout)
             if abs(new - FS_GCS_TIMEOUT_S) > 1e-6:
@@ -269,7 +236,7 @@ class ArduPilotProfile:
         return 2.0 + (spool if spool is not None and 0.0 <= spool <= 2.0 else 0.5)
 
     @staticmethod
-    def arming_refusal(statustexts, result: int) -> str:
+    def arming_refusal(status, result: int) -> str:
         """The reason of a refused arming: the last "Arm"/"PreArm" STATUSTEXT, else the MAV_RESULT."""
-        texts = [t for t in statustexts if "arm" in t.lower()]
+        texts = [t for t in status.statustext if "arm" in t.lower()]
         return texts[-1] if texts else f"MAV_RESULT {result}"

@@ -17,6 +17,8 @@ __all__ = ["BUILTIN_SITL_MARK", "CAP_SET_ACTUATOR_TARGET", "CAP_SET_ATTITUDE_TAR
 BUILTIN_SITL_MARK = b"gcssitl\0"
 #: MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET.
 CAP_SET_ATTITUDE_TARGET = 64
+#: MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE: integer parameters are the float field's bytes.
+CAP_PARAM_ENCODE_BYTEWISE = 16
 #: MAV_PROTOCOL_CAPABILITY_SET_ACTUATOR_TARGET (1024; "RESERVED3" in newer dialects): the
 #: autopilot takes SET_ACTUATOR_CONTROL_TARGET.  ArduCopter does not (it has no handler).
 CAP_SET_ACTUATOR_TARGET = 1024
@@ -58,6 +60,12 @@ class Firmware:
         if self.capabilities is None:
             return None
         return bool(self.capabilities & CAP_SET_ACTUATOR_TARGET)
+
+    def params_bytewise(self) -> bool:
+        """Integer parameters travel bytewise (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE; PX4 when unknown)."""
+        if self.capabilities is None:
+            return self.autopilot == 12
+        return bool(self.capabilities & CAP_PARAM_ENCODE_BYTEWISE)
 
     def describe(self) -> str:
         family = {3: "ArduPilot", 12: "PX4"}.get(self.autopilot, f"autopilot {self.autopilot}")

@@ -54,8 +54,11 @@ class MavlinkSession:
     ----------
     config : Config
     link : MavlinkLink
-    profile : ArduPilotProfile or None
-        The firmware family's conventions (default ArduPilot).
+    profile : ArduPilotProfile, Px4Profile or None
+        The firmware family's conventions (None: chosen from the HEARTBEAT's ``autopilot`` by
+        :func:`~gcs.vehicles.autopilots.profile_for`; ArduPilot's until then).
+    event_metadata : gcs.vehicles.px4_events.EventMetadata or None
+        PX4's event metadata (arming refusals in words), for a PX4 profile chosen from HEARTBEAT.
     output : str or None
         Setpoint message (default: the config's ``[flight] output``).
     vehicle_alive : callable () -> str or None
@@ -76,10 +79,12 @@ class MavlinkSession:
     def __init__(self, config: Config, link: MavlinkLink, *, profile: ArduPilotProfile | None = None,
                  output: str | None = None, vehicle_alive: Callable[[], str | None] | None = None,
                  speedup: float | None = None, ready_timeout_s: float = 60.0,
-                 boot_speedup: float | None = None) -> None:
+                 boot_speedup: float | None = None, event_metadata=None) -> None:
         fc = config.flight
         self.config = config
         self.link = link
+        self.profile_given = profile is not None
+        self.event_metadata = event_metadata
         self.profile = profile or ArduPilotProfile()
         self.control_name = self.profile.control_name
         self.output_kind = output or fc.output
@@ -125,6 +130,14 @@ class MavlinkSession:
         # A child simulator is new each flight: nothing of an earlier one to recover.
         journal = None if self.vehicle_alive is not None else ParamJournal(f"{self.link.url}#{self.link.target_system}")
         self.params = VehicleParams(self.link, self.handle, self.event, self.check_interrupt, journal)
+
+    def use_profile(self, profile) -> None:
+        """Fly with ``profile`` (the autopilot family found in HEARTBEAT): modes named its way from now on."""
+        self.profile = profile
+        self.control_name = profile.control_name
+        self.telemetry.status.mode_name = profile.mode_name
+        events = getattr(profile, "events", None)
+        self.telemetry.describe_event = events.describe if events is not None else None
 
     def event(self, kind: str, text: str) -> None:
         self.ctx.event(kind, text)  # type: ignore[union-attr]
@@ -310,8 +323,13 @@ class MavlinkSession:
             self.event("warning", f"{gone}: nothing left to land")
             return
         if reason == "vehicle_took_over":
-            self.wait(lambda: not self.telemetry.status.armed, self.config.flight.land_timeout_s, thrust_n=None,
-                       until_interrupt=False)
+            st, hover = self.telemetry.status, self.profile.hover_modes
+            self.wait(lambda: not st.armed or st.custom_mode in hover, self.config.flight.land_timeout_s,
+                      thrust_n=None, until_interrupt=False)
+            if st.armed and st.custom_mode in hover:
+                # A failsafe of the autopilot's own left it hovering (PX4 Hold): nobody flies it; land it.
+                self.event("failsafe", f"the vehicle hovers in {st.mode} by itself: landing it")
+                self._land(reason)
         else:
             self._land(reason)
 

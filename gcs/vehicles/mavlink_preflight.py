@@ -18,6 +18,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.errors import PreflightRefused
 from gcs.link.mavlink import LinkError
+from gcs.vehicles.autopilots import profile_for
 from gcs.vehicles.firmware import Firmware
 
 __all__ = ["MavlinkPreflight", "PROGRESS_PERIOD_S", "ARM_RETRY_S"]
@@ -62,9 +63,12 @@ class MavlinkPreflight:
         deadline_ns = self.s.ctx.now_ns() + int(self.s.ready_timeout_s * 1e9)
         self._wait_ready(deadline_ns)
         self._check_battery(fc.min_battery_v)
-        self._enter_flight_mode()
-        # Stream setpoints before arming (0.5 s of idle, level).
+        # Setpoints stream before arming (0.5 s of idle, level) and, where the autopilot needs an
+        # offboard signal to enter the flight mode (PX4), before the mode is asked for too.
         steps = int(round(0.5 / self.s.period_s))
+        if self.profile.stream_before_mode:
+            self.s.wait(lambda: False, steps * self.s.period_s - 1e-9, thrust_n=0.0, until_interrupt=False)
+        self._enter_flight_mode()
         self.s.wait(lambda: False, steps * self.s.period_s - 1e-9, thrust_n=0.0, until_interrupt=False)
         self._arm(max(deadline_ns, self.s.ctx.now_ns() + int(5e9)))
         self._spool_up()
@@ -81,6 +85,11 @@ class MavlinkPreflight:
             pass  # an autopilot that does not answer: nothing known of its capabilities
         fw = Firmware.from_messages(hb.autopilot, tm.autopilot_version)
         self.s.firmware = fw
+        if not self.s.profile_given:
+            self.s.use_profile(profile_for(int(hb.autopilot), events=self.s.event_metadata))
+            self.profile = self.s.profile
+        # Integer parameters bytewise where the autopilot says so (PX4), else C-cast floats.
+        self.link.param_bytewise = fw.params_bytewise()
         caps = "capabilities unknown" if fw.capabilities is None else f"capabilities 0x{fw.capabilities:x}"
         self.s.event("link", f"firmware {fw.describe()} ({caps})")
 
@@ -188,16 +197,22 @@ class MavlinkPreflight:
         """Arm; a refusal of a vehicle still initialising is tried again every second until ``deadline_ns``."""
         ctx, st = self.s.ctx, self.telemetry.status
         said = None
+        p = self.profile
         while True:
             self.s.check_interrupt()
+            if st.custom_mode != p.flight_mode:
+                # Never arm in a mode the vehicle does not report (it may have left it while we waited).
+                raise PreflightRefused(f"the vehicle left {p.mode_name(p.flight_mode)} before arming: it reports "
+                                       f"{st.mode}")
             self.s.armed_sent = True
             st.statustext.clear()
+            st.events.clear()
             res = self.link.arm(True, on_message=self.s.handle)
             if res == mavlink.MAV_RESULT_ACCEPTED:
                 break
-            # The reason comes as STATUSTEXT, before or just after the acknowledgement.
-            self.link.wait(lambda m: m.get_type() == "STATUSTEXT", 0.5, self.s.handle)
-            why = self.profile.arming_refusal(st.statustext, res)
+            # The reason comes as STATUSTEXT (PX4: EVENT), before or just after the acknowledgement.
+            self.link.wait(lambda m: m.get_type() in ("STATUSTEXT", "UNKNOWN_410"), 0.5, self.s.handle)
+            why = self.profile.arming_refusal(st, res)
             if res not in _RETRY_RESULTS or ctx.now_ns() + int(ARM_RETRY_S * 1e9) > deadline_ns:
                 raise PreflightRefused(f"arming refused: {why}" + ("" if res not in _RETRY_RESULTS else
                                        f" (still refused at the ready timeout, {self.s.ready_timeout_s:g} s)"))

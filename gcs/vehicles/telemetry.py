@@ -6,7 +6,8 @@ rates.  The vehicle's own time (``time_boot_ms``) is tracked: it is the clock of
 lockstep or paced flight.  Freshness is kept per stream twice: by arrival on the loop's clock,
 and by the sample's own time stamp on the vehicle's clock (:class:`VehicleTimeMap`), so that
 old samples delivered late (a link or a ground station that stalled, a radio that buffered)
-count as old.  EKF_STATUS_REPORT flags are kept for the readiness report.
+count as old.  EKF_STATUS_REPORT flags are kept for the readiness report, EXTENDED_SYS_STATE's
+landed state and PX4's EVENTs (arming refusals) for the profile.
 """
 
 from __future__ import annotations
@@ -20,11 +21,13 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.estimate import StateEstimator
 from gcs.flight.validate import TelemetryValidator
+from gcs.vehicles.px4_events import parse_event
 from quadrotor.mavlink.modes import copter_mode_name
 from quadrotor.frames import body_rates_to_euler_rates, ned_to_paper_position, ned_to_paper_velocity
 
 __all__ = ["VehicleStatus", "Telemetry", "VehicleTimeMap"]
 
+_LANDED = {0: "landed state unknown", 1: "on the ground", 2: "in the air", 3: "taking off", 4: "landing"}
 #: Upward drift allowed for the vehicle-to-loop clock offset (crystal drift; a restart of the floor) [s/s].
 OFFSET_DRIFT = 1e-4
 
@@ -71,6 +74,11 @@ class VehicleStatus:
     #: EKF_STATUS_REPORT flags (None: never reported).
     ekf_flags: int | None = None
     statustext: deque = field(default_factory=lambda: deque(maxlen=64))
+    #: PX4 EVENTs (:class:`~gcs.vehicles.px4_events.Px4Event`), newest last.
+    events: deque = field(default_factory=lambda: deque(maxlen=16))
+    #: EXTENDED_SYS_STATE landed_state (MAV_LANDED_STATE: 1 on ground, 2 in air, 3 taking off, 4 landing;
+    #: None: never reported).
+    landed_state: int | None = None
     #: custom_mode -> the mode's name (the autopilot profile's).
     mode_name: Callable[[int], str] = field(default=copter_mode_name, repr=False)
 
@@ -107,6 +115,8 @@ class Telemetry:
         self.time_map = VehicleTimeMap()
         #: The loop's clock is the vehicle's own time (lockstep, paced): set by the session.
         self.on_vehicle_clock = False
+        #: PX4 EVENT -> its text (the profile's metadata), or None: events kept, not said.
+        self.describe_event: Callable | None = None
         #: The autopilot's AUTOPILOT_VERSION, once received.
         self.autopilot_version = None
         self.timesync_rtt_ms: float | None = None
@@ -151,6 +161,8 @@ class Telemetry:
             self._sys_status(msg)
         elif t == "EKF_STATUS_REPORT":
             st.ekf_flags = int(msg.flags)
+        elif t in ("EXTENDED_SYS_STATE", "UNKNOWN_410"):
+            self._px4_status(msg)
         elif t == "AUTOPILOT_VERSION":
             self.autopilot_version = msg
         elif t == "STATUSTEXT":
@@ -178,6 +190,20 @@ class Telemetry:
             st.custom_mode = int(msg.custom_mode)
             self._event("mode", st.mode)
         st.system_status = int(msg.system_status)
+
+    def _px4_status(self, msg) -> None:
+        """EXTENDED_SYS_STATE's landed state, PX4's EVENTs (kept; said when the profile can put them in words)."""
+        st = self.status
+        if msg.get_type() == "EXTENDED_SYS_STATE":
+            if msg.landed_state != st.landed_state and st.landed_state is not None:
+                self._event("landed_state", _LANDED.get(int(msg.landed_state), str(msg.landed_state)))
+            st.landed_state = int(msg.landed_state)
+            return
+        ev = parse_event(msg)
+        if ev is not None:
+            st.events.append(ev)
+            if self.describe_event is not None and ev.level != "unknown":
+                self._event("px4_event", f"[{ev.level}] {self.describe_event(ev)}")
 
     def _sys_status(self, msg) -> None:
         """Battery voltage (validated; 65535 = not reported) and remaining charge (-1 = not reported)."""

@@ -1,0 +1,61 @@
+"""Autopilot profiles: the firmware family's conventions behind one small interface, chosen from HEARTBEAT.
+
+A profile (:class:`~gcs.vehicles.ardupilot.ArduPilotProfile`,
+:class:`~gcs.vehicles.px4.Px4Profile`) has
+
+* ``name``, ``control_name``; ``flight_mode``, ``land_mode``, ``control_modes`` (HEARTBEAT
+  ``custom_mode`` values), ``mode_name(custom_mode)``, ``stream_before_mode`` (setpoints must
+  flow before the flight mode is asked for), ``hover_modes`` (a mode the vehicle takes by
+  itself to hover, after which the ground station lands it);
+* ``set_mode_message(link, mode)`` / ``request_mode(link, mode, on_message=...)``;
+* ``configure(params, firmware, output) -> OutputParams`` and ``configure_output(...)``:
+  parameters set for the flight (restored afterwards) and read for the output adapters;
+* ``control_lost(status)``, ``spool_up_s(params, firmware)``, ``arming_refusal(status, result)``.
+
+:func:`gcs.vehicles.autopilots.profile_for` picks one by HEARTBEAT ``autopilot``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from gcs.link.mavlink import LinkError
+
+__all__ = ["OutputParams", "optional_param"]
+
+
+@dataclass(frozen=True)
+class OutputParams:
+    """What the output adapters need from the autopilot (read, and set, by a profile's ``configure``).
+
+    Attributes
+    ----------
+    hover_throttle : float
+        The thrust field that holds the vehicle (ArduPilot MOT_THST_HOVER, PX4 MPC_THR_HOVER).
+    angle_gain_1_s : (3,) float
+        The angle loop's gains [1/s] (ATC_ANG_RLL/PIT/YAW_P; MC_ROLL_P/PITCH_P/YAW_P).
+    angle_accel_limit_rad_s2 : (3,) float
+        The angle loop's square-root limits (ArduPilot: :func:`~gcs.vehicles.ardupilot.angle_accel_limits`;
+        0: linear, as PX4's).
+    rate_limit_rad_s : (3,) float
+        Body-rate limits [rad/s] (0: none).
+    output : str or None
+        The output the parameters were set for (None: not yet; see the profile's ``configure_output``).
+    """
+
+    hover_throttle: float
+    angle_gain_1_s: tuple[float, float, float]
+    angle_accel_limit_rad_s2: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rate_limit_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    output: str | None = None
+
+
+def optional_param(params, name: str) -> float | None:
+    """A parameter the flight can do without: its value, or None when the vehicle has none (quietly)."""
+    params.check_interrupt()
+    try:
+        value = params.link.param_get(name, timeout_s=1.0, retries=1, on_message=params.on_message)
+    except LinkError:
+        return None
+    return value if math.isfinite(value) else None
