@@ -83,6 +83,19 @@ def test_event_frames_get_their_header_and_decode_with_metadata():
     assert "not in" in meta.describe(parse_event(_event_frame(99)))
 
 
+def test_enum_and_bitfield_arguments_are_put_in_words():
+    enums = {"arm_disarm_reason_t": {"type": "uint8_t", "entries": {"6": {"description": "landing"}}},
+             "group_t": {"type": "uint32_t", "is_bitfield": True,
+                         "entries": {"1": {"description": "Manual"}, "4": {"description": "Offboard"}}}}
+    meta = EventMetadata({"components": {"0": {"enums": enums}, "1": {"event_groups": {"c": {"events": {
+        "9": {"message": "Disarmed by {1} ({2})",
+              "arguments": [{"name": "r", "type": "arm_disarm_reason_t"}, {"name": "g", "type": "group_t"}]},
+        "10": {"message": "Disarmed by {1}", "arguments": [{"name": "r", "type": "arm_disarm_reason_t"}]}}}}}}})
+    ev = parse_event(_event_frame((1 << 24) | 9, bytes([6]) + struct.pack("<I", 5)))
+    assert meta.describe(ev) == "Disarmed by landing (Manual, Offboard)"
+    assert meta.describe(parse_event(_event_frame((1 << 24) | 10, bytes([77])))) == "Disarmed by 77"  # not listed
+
+
 def _status(**kw):
     base = dict(armed=True, custom_mode=OFFBOARD, statustext=deque(), events=deque())
     base.update(kw)

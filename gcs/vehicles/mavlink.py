@@ -252,7 +252,8 @@ class MavlinkSession:
                                                           drag_1_s=self.config.vehicle.drag_n_per_m_s
                                                           / self.config.vehicle.mass_kg) if observe else None)
         self.event("output", f"{self.output_kind}: hover throttle {out.hover_throttle:.3f}, "
-                             f"angle gains {out.angle_gain_1_s}, rate demand gains {self.config.flight.rate_gain_1_s}; "
+                             f"angle gains ({', '.join(f'{g:.4g}' for g in out.angle_gain_1_s)}), rate demand gains "
+                             f"{self.config.flight.rate_gain_1_s}; "
                              + (f"disturbance observer on (tau {tau:g} s)" if observe
                                 else "no disturbance observer"))
 

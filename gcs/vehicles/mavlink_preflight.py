@@ -171,6 +171,9 @@ class MavlinkPreflight:
                 self.s.event("warning", f"stream {mid} at {hz:g} Hz not accepted (MAV_RESULT {res})")
         # For the readiness report only (not every autopilot has it): not waited for.
         self.s.io.quietly(lambda: self.link.send_message_interval(mavlink.MAVLINK_MSG_ID_EKF_STATUS_REPORT, 1.0))
+        # For the log: what the autopilot's inner loop was asked (PX4 fills the body rates with its rate
+        # setpoint, ArduCopter with its own attitude controller's target).
+        self.s.io.quietly(lambda: self.link.send_message_interval(mavlink.MAVLINK_MSG_ID_ATTITUDE_TARGET, 50.0))
 
     def _check_battery(self, min_v: float) -> None:
         st = self.telemetry.status

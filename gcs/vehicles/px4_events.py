@@ -75,6 +75,9 @@ class EventMetadata:
     def __init__(self, doc: dict, source: str = "") -> None:
         self.source = source
         self._events: dict[int, dict] = {}
+        self._enums: dict[str, dict] = {}
+        for comp in doc.get("components", {}).values():
+            self._enums.update(comp.get("enums", {}))
         for cid, comp in doc.get("components", {}).items():
             for group in comp.get("event_groups", {}).values():
                 for sub, ev in group.get("events", {}).items():
@@ -108,11 +111,15 @@ class EventMetadata:
         ev = self._events.get(event.event_id)
         if ev is None:
             return f"event {event.component}:{event.sub_id} (not in {self.source or 'the metadata'})"
-        values, offset = [], 0
+        values: list = []
+        offset = 0
         for arg in ev.get("arguments", []):
-            fmt = _ARG_TYPES.get(arg.get("type", ""), "<B")  # an enum: its underlying byte(s)
+            kind = arg.get("type", "")
+            enum = self._enums.get(kind)
+            fmt = _ARG_TYPES.get(enum.get("type", "") if enum is not None else kind, "<B")
             size = struct.calcsize(fmt)
-            values.append(struct.unpack_from(fmt, event.arguments.ljust(offset + size, b"\0"), offset)[0])
+            v = struct.unpack_from(fmt, event.arguments.ljust(offset + size, b"\0"), offset)[0]
+            values.append(v if enum is None else _enum_text(enum, v))
             offset += size
 
         def arg(m: re.Match) -> str:
@@ -125,6 +132,20 @@ class EventMetadata:
 
         text = re.sub(r"\{(\d+)(?::\.?(\d+))?[^}]*\}", arg, ev.get("message", ""))
         return re.sub(r"</?[a-z]+[^>]*>", "", text).strip()
+
+
+def _enum_text(enum: dict, value: int) -> str:
+    """An enum argument in words: its entry's description (a bitfield: those of its set bits)."""
+    entries = enum.get("entries", {})
+
+    def text(v: int) -> str:
+        e = entries.get(str(v), {})
+        return e.get("description") or e.get("name") or str(v)
+
+    if enum.get("is_bitfield"):
+        bits = [text(1 << b) for b in range(64) if value >> b & 1]
+        return ", ".join(bits) if bits else "none"
+    return text(value)
 
 
 def find_event_metadata(px4_build: str | os.PathLike | None = None) -> Path | None:

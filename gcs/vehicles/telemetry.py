@@ -22,6 +22,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from gcs.estimate import StateEstimator
 from gcs.flight.validate import TelemetryValidator
 from gcs.vehicles.px4_events import parse_event
+from gcs.vehicles.px4_modes import px4_mode_name
 from quadrotor.mavlink.modes import copter_mode_name
 from quadrotor.frames import body_rates_to_euler_rates, ned_to_paper_position, ned_to_paper_velocity
 
@@ -188,7 +189,10 @@ class Telemetry:
             self._event("arming", "armed" if armed else "disarmed")
         if msg.custom_mode != st.custom_mode:
             st.custom_mode = int(msg.custom_mode)
-            self._event("mode", st.mode)
+            namer = st.mode_name
+            if namer is copter_mode_name and msg.autopilot == mavlink.MAV_AUTOPILOT_PX4:
+                namer = px4_mode_name  # the first HEARTBEAT, before the profile is chosen from it
+            self._event("mode", namer(st.custom_mode))
         st.system_status = int(msg.system_status)
 
     def _px4_status(self, msg) -> None:

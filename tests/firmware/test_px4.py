@@ -14,6 +14,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -51,18 +52,23 @@ def _check_landed_and_restored(ev: list[str]) -> None:
     assert not any("GUID_OPTIONS" in e or "ATC_" in e for e in ev), "ArduPilot parameters sent to PX4"
 
 
-def test_a_circle_on_px4_in_offboard(tmp_path):
+@pytest.mark.parametrize(("controller", "output"),
+                         [(c, o) for c in ("nlsoc", "loc", "pd") for o in ("attitude", "rates")])
+def test_a_circle_on_px4_in_offboard(tmp_path, controller, output):
     """Recognised as PX4 from HEARTBEAT, setpoints streamed before OFFBOARD, confirmed, armed, flown,
-    landed by NAV_LAND, disarmed by PX4, its parameters (INT32 bytewise) restored, a complete log."""
-    p = subprocess.run(_fly_args(tmp_path, "pd", "--controller", "pd", "--duration", "14"), env=_env(tmp_path),
-                       capture_output=True, text=True, timeout=240)
+    landed by NAV_LAND, disarmed by PX4, its parameters (INT32 bytewise) restored, a complete log; the
+    flight does not diverge (the issue's 0.10 m RMS target is not met on PX4 SIH yet: docs/FIRMWARE.md).
+    At PX4_SIM_SPEED_FACTOR 2 (the flight runs on the vehicle's clock)."""
+    name = f"{controller}-{output}"
+    p = subprocess.run(_fly_args(tmp_path, name, "--controller", controller, "--output", output, "--duration", "14",
+                                 "--speedup", "2"), env=_env(tmp_path), capture_output=True, text=True, timeout=240)
     assert "Traceback" not in p.stderr + p.stdout, p.stderr[-2000:]
     assert p.returncode == 0, p.stderr[-2000:]
-    s, ev = _events(tmp_path, "pd")
+    s, ev = _events(tmp_path, name)
     assert s["exit_reason"] == "completed"
     assert "Offboard" in ev and "Land" in ev, ev  # the modes, by PX4's names
     _check_landed_and_restored(ev)
-    assert not read_log(tmp_path / "pd.mcap", None).truncated
+    assert not read_log(tmp_path / f"{name}.mcap", None).truncated
     rms = s["metrics"]["rms_error_m"]
     assert math.isfinite(rms) and rms < 0.6, f"RMS position error {rms:.3f} m"  # the take-off and 6 s of circle
 
@@ -91,3 +97,122 @@ def test_ctrl_c_on_px4_lands_disarms_and_restores(tmp_path):
     s, ev = _events(tmp_path, "int")
     assert s["exit_reason"] == "interrupted"
     _check_landed_and_restored(ev)
+
+
+def _free_udp_port() -> int:
+    import socket
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _connect_args(tmp_path: Path, name: str, port: int, px4, *extra: str) -> list[str]:
+    """``gcs fly`` through the proxy on ``port`` to PX4 instance ``px4.instance`` (MAV_SYS_ID = N + 1)."""
+    return [sys.executable, "-m", "gcs.cli", "fly", "--connect", f"udpin:127.0.0.1:{port}",
+            "--target-system", str(px4.instance + 1),
+            "--summary", str(tmp_path / f"{name}.json"), "--log", str(tmp_path / f"{name}.mcap"), "-q", *extra]
+
+
+def test_an_offboard_mode_that_never_arrives_refuses_arming(tmp_path):
+    """DO_SET_MODE(OFFBOARD) ACKed ACCEPTED (forged by a proxy) but PX4's HEARTBEAT never shows OFFBOARD:
+    refused before arming (exit 7), naming the mode the vehicle is in."""
+    from gcs.vehicles.px4_sitl import Px4Sitl
+    from px4_link import Px4LinkProxy
+
+    port = _free_udp_port()
+    with Px4Sitl(BUILD) as px4, Px4LinkProxy(px4.instance, port, swallow_offboard=True) as proxy:
+        p = subprocess.run(_connect_args(tmp_path, "nomode", port, px4, "--controller", "pd", "--duration", "5"),
+                           env=_env(tmp_path), capture_output=True, text=True, timeout=180)
+    assert "Traceback" not in p.stderr, p.stderr[-2000:]
+    assert p.returncode == 7, p.stderr[-2000:]
+    assert proxy.swallowed >= 1, "the proxy never saw the mode command"
+    assert proxy.armed_at is None, "armed in a mode that was never confirmed"
+    last = p.stderr.strip().splitlines()[-1]
+    assert "Offboard" in last and "Hold" in last, last  # what was asked, what was seen, by PX4's names
+    _, ev = _events(tmp_path, "nomode")
+    assert "armed" not in ev
+
+
+def test_a_dead_link_mid_flight_px4_lands_level_and_gcs_restores(tmp_path):
+    """3 s without any traffic either way, 6 s after arming (in the air): PX4's offboard-loss failsafe,
+    configured for the flight (COM_OF_LOSS_T 0.5 s, then Land), keeps the vehicle level and lands it; once
+    the link is back gcs sees it landing, waits for landed and disarmed, and restores the parameters."""
+    from gcs.vehicles.px4_sitl import Px4Sitl
+    from px4_link import Px4LinkProxy
+
+    port = _free_udp_port()
+    with Px4Sitl(BUILD) as px4, Px4LinkProxy(px4.instance, port) as proxy:
+        proxy.blackout_after_arming(6.0, 3.0)
+        p = subprocess.run(_connect_args(tmp_path, "dead", port, px4, "--controller", "pd", "--duration", "20"),
+                           env=_env(tmp_path), capture_output=True, text=True, timeout=240)
+    assert "Traceback" not in p.stderr, p.stderr[-2000:]
+    s, ev = _events(tmp_path, "dead")
+    assert s["exit_reason"] != "completed", s["exit_reason"]
+    assert proxy.max_tilt_deg_in_blackout < 10.0, f"tilted {proxy.max_tilt_deg_in_blackout:.1f} deg"
+    assert any("Land" in e for e in ev), ev[-12:]
+    _check_landed_and_restored(ev)
+    assert not read_log(tmp_path / "dead.mcap", None).truncated
+
+
+def _fly_until(args: list[str], env: dict, t_s: float) -> subprocess.Popen:
+    """A ``gcs fly`` (not quiet) read until its mission clock passes ``t_s``."""
+    proc = subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    for line in proc.stdout:  # type: ignore[union-attr]
+        if line.startswith("t ") and float(line.split()[1]) >= t_s:
+            break
+    return proc
+
+
+def test_a_frozen_ground_station_leaves_px4_level_and_landed(tmp_path):
+    """SIGSTOP of gcs fly for 2 s in the air: PX4 holds our last (zero-rate) attitude setpoint for
+    COM_OF_LOSS_T = 0.5 s, then lands (COM_OBL_RC_ACT = Land); never beyond 10 deg of tilt; after SIGCONT
+    gcs sees the vehicle taken over, waits for landed and disarmed, and restores the parameters."""
+    from gcs.vehicles.px4_sitl import Px4Sitl
+    from px4_link import Px4LinkProxy
+
+    port = _free_udp_port()
+    with Px4Sitl(BUILD) as px4, Px4LinkProxy(px4.instance, port) as proxy:
+        args = [a for a in _connect_args(tmp_path, "stall", port, px4, "--controller", "nlsoc", "--duration", "20")
+                if a != "-q"]
+        proc = _fly_until(args, _env(tmp_path), 6.0)
+        try:
+            proc.send_signal(signal.SIGSTOP)
+            time.sleep(2.0)
+            proc.send_signal(signal.SIGCONT)
+            _, err = proc.communicate(timeout=180)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    assert "Traceback" not in err, err[-2000:]
+    assert proxy.max_tilt_deg < 10.0, f"tilted {proxy.max_tilt_deg:.1f} deg"
+    s, ev = _events(tmp_path, "stall")
+    assert s["exit_reason"] in ("vehicle_took_over", "telemetry_lost"), s["exit_reason"]
+    assert "Land" in ev, ev[-12:]
+    _check_landed_and_restored(ev)
+
+
+def test_after_a_sigkill_px4_lands_and_the_next_flight_restores(tmp_path):
+    """SIGKILL of gcs fly in the air: PX4's offboard-loss failsafe lands and disarms it; the next gcs fly
+    finds COM_OBL_RC_ACT and COM_OF_LOSS_T left at their flight values and puts them back first."""
+    from gcs.vehicles.px4_sitl import Px4Sitl
+    from px4_link import Px4LinkProxy
+
+    port = _free_udp_port()
+    with Px4Sitl(BUILD) as px4, Px4LinkProxy(px4.instance, port) as proxy:
+        args = [a for a in _connect_args(tmp_path, "killed", port, px4, "--controller", "loc") if a != "-q"]
+        proc = _fly_until(args, _env(tmp_path), 5.0)
+        proc.kill()
+        proc.communicate(timeout=10)
+        assert list((tmp_path / "state").glob("params-*.json")), "no parameter journal left by the killed flight"
+        deadline = time.monotonic() + 60
+        while proxy.armed and time.monotonic() < deadline:
+            time.sleep(0.5)
+        assert not proxy.armed, "PX4 still armed 60 s after the ground station died"
+        assert proxy.max_tilt_deg < 10.0, f"tilted {proxy.max_tilt_deg:.1f} deg"
+        p = subprocess.run(_connect_args(tmp_path, "next", port, px4, "--controller", "loc", "--duration", "4"),
+                           env=_env(tmp_path), capture_output=True, text=True, timeout=180)
+    assert p.returncode == 0, p.stderr[-2000:]
+    _, ev = _events(tmp_path, "next")
+    assert any("left at its flight value" in e for e in ev), ev[:20]
+    _check_landed_and_restored(ev)
+    assert not list((tmp_path / "state").glob("params-*.json")), "the journal outlived a flight that restored all"

@@ -1,0 +1,122 @@
+"""The same flights on three vehicles: the built-in SITL, ArduPilot's ArduCopter SITL and PX4 SITL + SIH.
+
+Run: ``python benchmarks/bench_autopilots.py [--quick] [--json] [--duration S] [--speedup S]``
+
+Every controller (nlsoc, loc, pd) with the attitude and rates outputs flies outdoor-circle for
+``--duration`` seconds (default 15: the 8 s take-off and 7 s of circle) on each vehicle: the built-in
+SITL in real time (``gcs fly``), ArduCopter and PX4 at ``--speedup`` (default 2) on the vehicle's clock
+(``--sitl arducopter`` / ``--sitl px4``; skipped where the firmware is absent: ``$GCS_ARDUCOPTER``,
+``$GCS_PX4`` or ``../shared``).  ``--quick``: nlsoc and pd with the attitude output only.
+Per flight: RMS position error, J_e, J_u_hover, the steady-state error and overshoot (gcs sim's
+metrics, from the summary) and the liftoff delay, from the log: how long after the reference first
+rises 5 cm above the take-off point the vehicle does (the built-in SITL is the baseline).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from benchlib import document, emit, row
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from gcs.log.mcap.reader import read_log
+from gcs.vehicles.arducopter_sitl import locate_arducopter
+from gcs.vehicles.px4_sitl import locate_px4
+
+ROOT = Path(__file__).resolve().parents[1]
+LIFT_M = 0.05
+
+
+def liftoff_delay_s(log_path: Path) -> float | None:
+    """Seconds between the reference and the vehicle first rising :data:`LIFT_M` above the start."""
+    log = read_log(log_path, lambda t: t in ("/control/state", "/control/reference"))
+    state = list(log.decoded("/control/state"))
+    ref = list(log.decoded("/control/reference"))
+    if not state or not ref:
+        return None
+    z0 = state[0][1]["z"]
+
+    def first(rows) -> int | None:
+        return next((ns for ns, d in rows if d["z"] > z0 + LIFT_M), None)
+
+    t_ref, t_veh = first(ref), first(state)
+    return None if t_ref is None or t_veh is None else (t_veh - t_ref) / 1e9
+
+
+def fly(vehicle: str, path: str | None, controller: str, output: str, duration_s: float, speedup: float) -> dict:
+    with tempfile.TemporaryDirectory(prefix="bench_ap_") as d:
+        summary, log = os.path.join(d, "s.json"), Path(d) / "f.mcap"
+        env = dict(os.environ, GCS_STATE_DIR=d, PYTHONPATH=str(ROOT))
+        argv = [sys.executable, "-m", "gcs.cli", "fly", "--controller", controller, "--output", output,
+                "--duration", f"{duration_s:g}", "-q", "--summary", summary, "--log", str(log)]
+        if vehicle != "builtin":
+            argv += ["--sitl", vehicle, f"--{vehicle}", str(path), "--speedup", f"{speedup:g}"]
+        t0 = time.monotonic()
+        p = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=900)
+        try:
+            s = json.loads(Path(summary).read_text())
+        except (OSError, ValueError):
+            tail = (p.stderr.strip().splitlines() or [""])[-1]
+            return {"exit_reason": f"no summary (exit {p.returncode}): {tail}", "wall_s": time.monotonic() - t0}
+        m = s.get("metrics") or {}
+        lift = liftoff_delay_s(log) if log.exists() else None
+        return {"exit_reason": s["exit_reason"], "wall_s": time.monotonic() - t0, "rms_m": m.get("rms_error_m"),
+                "J_e": m.get("J_e"), "J_u_hover": m.get("J_u_hover"), "steady_m": m.get("steady_state_error_m"),
+                "overshoot_m": m.get("overshoot_m"), "liftoff_s": lift}
+
+
+def _fmt(v, spec: str) -> str:
+    return "-" if v is None else format(v, spec)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="nlsoc and pd, attitude output only")
+    ap.add_argument("--json", action="store_true", help="text on stderr, one JSON document on stdout")
+    ap.add_argument("--duration", type=float, default=15.0, help="mission seconds per flight (default 15)")
+    ap.add_argument("--speedup", type=float, default=2.0, help="speed-up of the firmware flights (default 2)")
+    args = ap.parse_args(argv)
+    vehicles = [("builtin", None), ("arducopter", locate_arducopter(ROOT.parent / "shared" / "arducopter")),
+                ("px4", locate_px4(ROOT.parent / "shared" / "px4"))]
+    controllers = ("nlsoc", "pd") if args.quick else ("nlsoc", "loc", "pd")
+    outputs = ("attitude",) if args.quick else ("attitude", "rates")
+    rows, results = [], []
+    header = f"{'controller':10} {'output':8} {'vehicle':10} {'RMS [m]':>8} {'J_e':>7} {'J_u_hover':>9} " \
+             f"{'steady [m]':>10} {'overshoot':>9} {'liftoff [s]':>11} {'wall [s]':>8}  exit"
+    lines = [header]
+    for controller in controllers:
+        for output in outputs:
+            for vehicle, path in vehicles:
+                if vehicle != "builtin" and path is None:
+                    lines.append(f"{controller:10} {output:8} {vehicle:10} skipped: firmware not found")
+                    continue
+                r = fly(vehicle, path, controller, output, args.duration, args.speedup)
+                r.update(controller=controller, output=output, vehicle=vehicle)
+                results.append(r)
+                lines.append(f"{controller:10} {output:8} {vehicle:10} {_fmt(r.get('rms_m'), '8.3f')} "
+                             f"{_fmt(r.get('J_e'), '7.1f')} {_fmt(r.get('J_u_hover'), '9.0f')} "
+                             f"{_fmt(r.get('steady_m'), '10.3f')} {_fmt(r.get('overshoot_m'), '9.3f')} "
+                             f"{_fmt(r.get('liftoff_s'), '11.2f')} {r['wall_s']:8.1f}  {r['exit_reason']}")
+                print(lines[-1], file=sys.stderr, flush=True)
+                base = next((b for b in results if b["vehicle"] == "builtin" and b["controller"] == controller
+                             and b["output"] == output), None)
+                if r.get("rms_m") is not None:
+                    rows.append(row(f"{controller}/{output}/{vehicle} RMS position error", r["rms_m"], "m",
+                                    baseline=f"{controller}/{output}/builtin",
+                                    baseline_value=None if base is None else base.get("rms_m"),
+                                    target="<= 0.10 m", met=r["rms_m"] <= 0.10))
+    text = "\n".join(lines)
+    emit(document("bench_autopilots", args.quick, {"flights": results, "duration_s": args.duration,
+                                                  "speedup": args.speedup}, rows), text, args.json)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,149 @@
+"""A small UDP proxy between ``gcs fly --connect`` and PX4's offboard link, for the PX4 failure tests.
+
+PX4 instance N sends its offboard link to 127.0.0.1:14540 + N (fixed by its startup script) and
+listens on 14580 + N.  The proxy takes 14540 + N, forwards everything to ``gcs fly --connect
+udpin:127.0.0.1:G`` and back, and can:
+
+* ``swallow_offboard``: drop our MAV_CMD_DO_SET_MODE(OFFBOARD) and answer it with a forged
+  COMMAND_ACK ACCEPTED from the vehicle (the ACK lies; HEARTBEAT keeps telling the truth);
+* watch PX4's ATTITUDE throughout (the largest tilt, whatever the ground station was doing);
+* :meth:`Px4LinkProxy.blackout`: forward nothing either way for a while (a dead radio link),
+  while it keeps decoding PX4's ATTITUDE so the test sees how the vehicle flew meanwhile.
+
+Only pymavlink and the standard library.
+"""
+
+from __future__ import annotations
+
+import math
+import selectors
+import socket
+import threading
+import time
+
+from pymavlink.dialects.v20 import common as mavlink
+
+__all__ = ["Px4LinkProxy"]
+
+OFFBOARD_MAIN = 6
+
+
+class Px4LinkProxy:
+    """The proxy thread.
+
+    Parameters
+    ----------
+    instance : int
+        The PX4 instance (its ports).
+    gcs_port : int
+        Where ``gcs fly --connect udpin:127.0.0.1:<gcs_port>`` listens.
+    swallow_offboard : bool
+        Forge the OFFBOARD acknowledgement and never let the command through.
+    """
+
+    def __init__(self, instance: int, gcs_port: int, *, swallow_offboard: bool = False) -> None:
+        self.vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.vehicle.bind(("127.0.0.1", 14540 + instance))
+        self.ground = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.ground.bind(("127.0.0.1", 0))
+        for s in (self.vehicle, self.ground):
+            s.setblocking(False)
+        self.px4_addr: tuple[str, int] | None = None
+        self.gcs_addr = ("127.0.0.1", gcs_port)
+        self.swallow_offboard = swallow_offboard
+        self.swallowed = 0
+        self.armed = False
+        self.armed_at: float | None = None
+        self.custom_modes: list[int] = []
+        self.max_tilt_deg = 0.0
+        self.max_tilt_deg_in_blackout = 0.0
+        self._blackout: tuple[float, float] | None = None
+        self._after_arming: tuple[float, float] | None = None
+        self._down = mavlink.MAVLink(None)
+        self._up = mavlink.MAVLink(None)
+        self._forger = mavlink.MAVLink(None, srcSystem=instance + 1, srcComponent=1)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="px4-proxy", daemon=True)
+
+    def __enter__(self) -> Px4LinkProxy:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join(5.0)
+        self.vehicle.close()
+        self.ground.close()
+
+    def blackout(self, start_in_s: float, length_s: float) -> None:
+        """Forward nothing from ``start_in_s`` from now, for ``length_s`` [s]."""
+        t0 = time.monotonic() + start_in_s
+        self._blackout = (t0, t0 + length_s)
+
+    def blackout_after_arming(self, after_s: float, length_s: float) -> None:
+        """A :meth:`blackout` ``after_s`` [s] after PX4 reports itself armed."""
+        self._after_arming = (after_s, length_s)
+
+    def in_blackout(self) -> bool:
+        b = self._blackout
+        return b is not None and b[0] <= time.monotonic() < b[1]
+
+    def _run(self) -> None:
+        sel = selectors.DefaultSelector()
+        sel.register(self.vehicle, selectors.EVENT_READ, "down")
+        sel.register(self.ground, selectors.EVENT_READ, "up")
+        while not self._stop.is_set():
+            for key, _ in sel.select(0.1):
+                while True:
+                    try:
+                        data, addr = key.fileobj.recvfrom(65535)  # type: ignore[union-attr]
+                    except (BlockingIOError, InterruptedError):
+                        break
+                    except OSError:
+                        continue
+                    if key.data == "down":
+                        self.px4_addr = addr
+                        self._from_px4(data)
+                    else:
+                        self._from_gcs(data)
+
+    def _decode(self, parser, data: bytes) -> list:
+        try:
+            return parser.parse_buffer(data) or []
+        except mavlink.MAVError:
+            return []
+
+    def _from_px4(self, data: bytes) -> None:
+        dark = self.in_blackout()
+        for m in self._decode(self._down, data):
+            t = m.get_type()
+            if t == "HEARTBEAT" and m.get_srcComponent() == 1:
+                armed = bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+                if armed and not self.armed:
+                    self.armed_at = time.monotonic()
+                    if self._after_arming is not None:
+                        self.blackout(*self._after_arming)
+                self.armed = armed
+                if not self.custom_modes or self.custom_modes[-1] != m.custom_mode:
+                    self.custom_modes.append(m.custom_mode)
+            elif t == "ATTITUDE":
+                tilt = math.degrees(math.acos(max(-1.0, min(1.0, math.cos(m.roll) * math.cos(m.pitch)))))
+                self.max_tilt_deg = max(self.max_tilt_deg, tilt)
+                if dark:
+                    self.max_tilt_deg_in_blackout = max(self.max_tilt_deg_in_blackout, tilt)
+        if not dark:
+            self.ground.sendto(data, self.gcs_addr)
+
+    def _from_gcs(self, data: bytes) -> None:
+        if self.in_blackout() or self.px4_addr is None:
+            return
+        if self.swallow_offboard:
+            for m in self._decode(self._up, data):
+                if (m.get_type() == "COMMAND_LONG" and m.command == mavlink.MAV_CMD_DO_SET_MODE
+                        and int(m.param2) == OFFBOARD_MAIN):
+                    self.swallowed += 1
+                    ack = self._forger.command_ack_encode(m.command, mavlink.MAV_RESULT_ACCEPTED, 0, 0,
+                                                          m.get_srcSystem(), m.get_srcComponent())
+                    self.ground.sendto(ack.pack(self._forger), self.gcs_addr)
+                    return
+        self.vehicle.sendto(data, self.px4_addr)
