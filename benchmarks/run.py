@@ -30,7 +30,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 #: Report order; any other bench_*.py found follows.
-ORDER = ("control", "fly", "link", "sitl", "log", "campaign", "rig", "firmware", "autopilots")
+ORDER = ("control", "fly", "link", "sitl", "log", "campaign", "rig", "firmware", "autopilots", "fidelity")
 TITLES = {"control": "Controller step and gain design (bench_control.py)",
           "fly": "gcs fly: lockstep speed and the loop tick (bench_fly.py)",
           "link": "Link overhead: MavlinkLink vs raw pymavlink (bench_link.py)",
@@ -39,7 +39,8 @@ TITLES = {"control": "Controller step and gain design (bench_control.py)",
           "campaign": "Campaign throughput (bench_campaign.py)",
           "rig": "Indoor rig protocol and emulator (bench_rig.py)",
           "firmware": "ArduCopter SITL in the loop: reliable speed-up (bench_firmware.py)",
-          "autopilots": "The same flights on the built-in SITL, ArduCopter and PX4 (bench_autopilots.py)"}
+          "autopilots": "The same flights on the built-in SITL, ArduCopter and PX4 (bench_autopilots.py)",
+          "fidelity": "sitl --emulate arducopter vs ArduCopter SITL: metrics and step responses (bench_fidelity.py)"}
 
 
 def benches(only: list[str] | None) -> list[Path]:

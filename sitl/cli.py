@@ -25,6 +25,9 @@ from quadrotor.clock import MonotonicClock
 from quadrotor.errors import QuadrotorError
 from quadrotor.mavlink.signing import default_state_path
 from sitl import options
+from sitl.copter.ardupilot_emulation import EMULATIONS
+from sitl.copter.ardupilot_emulation.status import EKF_READY_S
+from sitl.copter.ardupilot_emulation.vehicle import INITIAL_YAW_DEG, arducopter_sitl_vehicle
 from sitl.copter.server import SitlServer
 from sitl.copter.vehicle import MODELS, VehicleParams
 from sitl.copter.vehicle_file import bundled_vehicles, load_vehicle
@@ -144,6 +147,12 @@ def _simulation_options(sim: argparse._ArgumentGroup) -> None:
     sim.add_argument("--sysid", metavar="N", type=int, default=None, help="MAVLink system id (SYSID_THISMAV)")
     sim.add_argument("--prearm-delay", metavar="S", type=float, default=0.0,
                      help="refuse arming for S simulated seconds after boot (a real autopilot's EKF takes ~20 s)")
+    sim.add_argument("--emulate", choices=EMULATIONS, default=None,
+                     help="fly ArduCopter's own inner loop, motors, spool-up, EKF start-up, GUID_TIMEOUT and "
+                          "status (sitl/copter/ardupilot_emulation) on ArduPilot SITL's X quad (unless --vehicle)")
+    sim.add_argument("--ekf-ready-s", metavar="S", type=float, default=None,
+                     help=f"with --emulate: the EKF is ready (position, arming) S s after boot "
+                          f"(default {EKF_READY_S:g}, as measured on the firmware)")
 
 
 def _link_options(link: argparse._ArgumentGroup) -> None:
@@ -192,7 +201,8 @@ def _describe_rig() -> str:
 _MAVLINK_ONLY = (("vehicle", None, "--vehicle"), ("model", None, "--model"), ("wind", None, "--wind"),
                  ("param", [], "--param"), ("sysid", None, "--sysid"), ("prearm_delay", 0.0, "--prearm-delay"),
                  ("signing_key", None, "--signing-key"), ("signing_state", None, "--signing-state"),
-                 ("start_attitude", None, "--start-attitude"), ("start_altitude", 0.0, "--start-altitude"))
+                 ("start_attitude", None, "--start-attitude"), ("start_altitude", 0.0, "--start-altitude"),
+                 ("emulate", None, "--emulate"), ("ekf_ready_s", None, "--ekf-ready-s"))
 
 
 def _run_rig(args: argparse.Namespace) -> int:
@@ -254,7 +264,7 @@ def _run(args: argparse.Namespace) -> int:
         raise UsageError("--bit-error-rate: only with --rig")
     options.check_common(args, 0.0025)
     options.check_mavlink(args)
-    vehicle = load_vehicle(args.vehicle)
+    vehicle = arducopter_sitl_vehicle() if args.emulate and args.vehicle is None else load_vehicle(args.vehicle)
     if args.model is not None:
         vehicle = vehicle.with_model(args.model)
     if args.describe:
@@ -262,9 +272,12 @@ def _run(args: argparse.Namespace) -> int:
         return 0
     pty = any(kind == "pty" for kind, _, _ in args.endpoints or [])
     baud = args.baud if args.baud is not None else (57600 if pty else 0)
-    initial = options.initial(args.start_altitude, args.start_attitude)
+    attitude = args.start_attitude
+    if args.emulate and attitude is None:
+        attitude = f"0,0,{INITIAL_YAW_DEG}"  # the firmware SITL's heading at boot
+    initial = options.initial(args.start_altitude, attitude)
     wind = options.wind(args.wind)
-    params = options.params(args.param, args.sysid, vehicle)
+    params = options.params(args.param, args.sysid, vehicle, args.emulate)
     key = options.signing_key(args.signing_key)
     state = None
     if key is not None:
@@ -275,8 +288,10 @@ def _run(args: argparse.Namespace) -> int:
     transports = options.open_endpoints(args.endpoints, clock.now_ns)
     server = SitlServer(transports, vehicle=vehicle, lockstep=args.lockstep, control_period_s=args.period,
                         seed=args.seed, wind=wind, initial=initial, params=params, signing_key=key,
-                        signing_state=state, radio=radio, clock=clock, prearm_delay_s=args.prearm_delay)
-    return _serve(server, f"{vehicle.name} ({vehicle.model})", args)
+                        signing_state=state, radio=radio, clock=clock, prearm_delay_s=args.prearm_delay,
+                        emulate=args.emulate, ekf_ready_s=args.ekf_ready_s)
+    what = f"{vehicle.name} ({vehicle.model}{', emulating ' + args.emulate if args.emulate else ''})"
+    return _serve(server, what, args)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

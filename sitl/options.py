@@ -13,6 +13,7 @@ Every numeric option must be finite and within its range; a bad one raises
 --param             a value the parameter accepts (finite, within its range)
 --sysid             1 .. 255
 --prearm-delay      0 .. 3600 s
+--ekf-ready-s       0 .. 3600 s, only with --emulate
 --baud              0 (no limit) or 50 .. 20000000
 --loss              0 .. 1
 --latency           0 .. 10 s
@@ -33,6 +34,7 @@ import math
 from collections.abc import Callable, Sequence
 
 from quadrotor.wind import WindParams
+from sitl.copter.ardupilot_emulation.vehicle import emulation_params
 from sitl.copter.params import ParamStore, ardupilot_params
 from sitl.copter.simulation import InitialConditions
 from sitl.copter.vehicle import VehicleParams
@@ -96,6 +98,10 @@ def check_common(args: argparse.Namespace, inner_period_s: float) -> None:
 def check_mavlink(args: argparse.Namespace) -> None:
     """Check the options of the simulated ArduCopter (not the rig's)."""
     _in_range("--prearm-delay", args.prearm_delay, 0.0, 3600.0, "s")
+    if args.ekf_ready_s is not None:
+        if args.emulate is None:
+            raise UsageError("--ekf-ready-s: only with --emulate")
+        _in_range("--ekf-ready-s", args.ekf_ready_s, 0.0, 3600.0, "s")
     _in_range("--start-altitude", args.start_altitude, 0.0, 10000.0, "m")
     if args.sysid is not None and not 1 <= args.sysid <= 255:
         raise UsageError(f"--sysid: must be in [1, 255], got {args.sysid}")
@@ -146,10 +152,12 @@ def initial(altitude_m: float, attitude: str | None) -> InitialConditions:
     return InitialConditions(altitude_m, r, pch, y)
 
 
-def params(items: Sequence[str], sysid: int | None, vehicle: VehicleParams) -> dict[str, float]:
-    """``--param NAME=VALUE`` overrides (and ``--sysid``), each checked against the parameter table."""
+def params(items: Sequence[str], sysid: int | None, vehicle: VehicleParams,
+           emulate: str | None = None) -> dict[str, float]:
+    """``--param NAME=VALUE`` overrides (and ``--sysid``), each checked against the parameter table
+    (the emulation's with ``emulate``)."""
     out: dict[str, float] = {}
-    store = ParamStore(ardupilot_params(vehicle))
+    store = ParamStore(emulation_params(vehicle) if emulate else ardupilot_params(vehicle))
     for item in items:
         name, sep, value = item.partition("=")
         name = name.strip().upper()

@@ -16,12 +16,20 @@ from sitl.copter.modes import ARMABLE_MODES, Mode
 from sitl.copter.params import ParamStore
 from sitl.copter.sensors import ImuReading, NavReading
 
-__all__ = ["arming_failure", "resting_voltage"]
+__all__ = ["arming_failure", "resting_voltage", "battery_low"]
 
 
 def resting_voltage(b: BatteryState, internal_resistance_ohm: float) -> float:
     """The pack's voltage without the present load [V]."""
     return b.voltage_v + b.current_a * internal_resistance_ohm
+
+
+def battery_low(b: BatteryState, params: ParamStore, internal_resistance_ohm: float) -> tuple[bool, float]:
+    """``(low, resting voltage [V])``: below ``BATT_LOW_VOLT`` or less than ``BATT_LOW_MAH`` left (0 = off)."""
+    rest = resting_voltage(b, internal_resistance_ohm)
+    low_v, low_mah = params["BATT_LOW_VOLT"], params["BATT_LOW_MAH"]
+    low = (low_v > 0 and rest < low_v) or (low_mah > 0 and params["BATT_CAPACITY"] - b.consumed_mah < low_mah)
+    return low, rest
 
 
 def _battery_failure(b: BatteryState, params: ParamStore, internal_resistance_ohm: float) -> str:

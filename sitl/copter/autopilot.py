@@ -16,8 +16,7 @@ Landing and disarming
     disarms on landing.  ``DISARM_DELAY`` s landed while armed disarms in every mode.  Disarming
     in flight is refused unless forced (param2 = 21196, which also skips the arming checks).
 Ground handling
-    In a guided mode a positive climb rate or thrust takes off; while landed anything else idles
-    the motors, as ArduCopter does.
+    In a guided mode a positive climb rate or thrust takes off; else the motors idle on the ground.
 """
 
 from __future__ import annotations
@@ -26,9 +25,10 @@ import math
 from collections.abc import Sequence
 
 from quadrotor.frames import euler_to_quaternion
-from sitl.copter.arming import arming_failure, resting_voltage
+from sitl.copter.arming import arming_failure, battery_low
 from sitl.copter.battery import BatteryState
-from sitl.copter.control import ClimbRateController, RateController, angle_boost, attitude_rate_demand, land_attitude
+from sitl.copter.control import (ClimbRateController, RateController, angle_boost, attitude_rate_demand, land_attitude,
+                                 land_speed)
 from sitl.copter.mixer import Mixer, MixResult
 from sitl.copter.modes import GUIDED_MODES, Mode
 from sitl.copter.params import ParamStore
@@ -56,9 +56,10 @@ class Autopilot:
     params : ParamStore
         ArduPilot parameters (:func:`sitl.copter.params.ardupilot_params`).
     prearm_delay_s : float
-        Arming is refused ("Arm: AHRS not ready") until this simulated time,
-        like a real autopilot whose EKF is still settling after boot.
+        Arming is refused ("Arm: AHRS not ready") until this simulated time (an EKF settling).
     """
+
+    identity: tuple[int, int, list[int]] | None = None  # AUTOPILOT_VERSION fields of an emulated firmware
 
     def __init__(self, vehicle: VehicleParams, params: ParamStore, prearm_delay_s: float = 0.0) -> None:
         self.vehicle = vehicle
@@ -109,9 +110,6 @@ class Autopilot:
         self._ang_p = (p["ATC_ANG_RLL_P"], p["ATC_ANG_PIT_P"], p["ATC_ANG_YAW_P"])
         self._rate_lim = tuple(math.radians(p[n]) for n in ("ATC_RATE_R_MAX", "ATC_RATE_P_MAX", "ATC_RATE_Y_MAX"))
         self._boost = p["ATC_ANGLE_BOOST"] >= 1
-        self._batt_low_v = p["BATT_LOW_VOLT"]
-        self._batt_low_mah = p["BATT_LOW_MAH"]
-        self._batt_cap = p["BATT_CAPACITY"]
         self._disarm_delay_ns = p["DISARM_DELAY"] * 1e9
 
     # ------------------------------------------------------------------ helpers
@@ -132,6 +130,15 @@ class Autopilot:
         if not self.armed:
             return 3
         return 5 if self.failsafe else 4
+
+    @property
+    def base_mode(self) -> int:
+        """HEARTBEAT base_mode: CUSTOM_MODE_ENABLED | STABILIZE_ENABLED, + GUIDED_ENABLED, + SAFETY_ARMED."""
+        return 1 | 16 | (8 if self.mode in GUIDED_MODES else 0) | (128 if self.armed else 0)
+
+    def position_ready(self, now_ns: int) -> bool:
+        """Whether LOCAL_POSITION_NED is sent (always here; an emulated EKF waits)."""
+        return True
 
     @property
     def landed_state(self) -> int:
@@ -268,13 +275,8 @@ class Autopilot:
 
     def _check_failsafes(self, now_ns: int, battery: BatteryState) -> None:
         if now_ns - self._timer_ns > self._timeout_ns and self.mode in GUIDED_MODES:
-            self._say(SEVERITY_WARNING, f"Guided timeout: no target for {self._timeout_ns * 1e-9:g} s, LAND")
-            self._enter(Mode.LAND, now_ns)
-            self.failsafe = "guided timeout"
-        low_v = self._batt_low_v
-        low_mah = self._batt_low_mah
-        rest = resting_voltage(battery, self._r_int)
-        low = (low_v > 0 and rest < low_v) or (low_mah > 0 and self._batt_cap - battery.consumed_mah < low_mah)
+            self._guided_timeout(now_ns)
+        low, rest = battery_low(battery, self.params, self._r_int)
         if not low:
             self._batt_low_since_ns = None
         elif self._batt_low_since_ns is None:
@@ -285,6 +287,12 @@ class Autopilot:
             if self._p("BATT_FS_LOW_ACT") >= 1 and self.mode != Mode.LAND:
                 self._enter(Mode.LAND, now_ns)
                 self.failsafe = "battery"
+
+    def _guided_timeout(self, now_ns: int) -> None:
+        """No target for GUID_TIMEOUT in a guided mode: level and LAND (the emulations override it)."""
+        self._say(SEVERITY_WARNING, f"Guided timeout: no target for {self._timeout_ns * 1e-9:g} s, LAND")
+        self._enter(Mode.LAND, now_ns)
+        self.failsafe = "guided timeout"
 
     def _level_q(self) -> tuple[float, float, float, float]:
         return euler_to_quaternion(0.0, 0.0, self._yaw_hold)
@@ -348,18 +356,12 @@ class Autopilot:
                 return (0.0, 0.0, 0.0, 0.0)
             c = self.vehicle.control
             q = land_attitude(nav.vn, nav.ve, self._yaw_hold, c.land_damping_1_s, self.vehicle.gravity_m_s2)
-            thr = self._climb_throttle(-self._land_speed(nav), dt, nav)
+            thr = self._climb_throttle(-land_speed(self.params, -nav.d), dt, nav)
             return self._fly(q, (0.0, 0.0, 0.0), False, thr, True, dt, imu)
         # STABILIZE without RC: zero throttle.
         if self.land_complete:
             return self._ground_idle()
         return self._fly(self._level_q(), (0.0, 0.0, 0.0), False, 0.0, False, dt, imu)
-
-    def _land_speed(self, nav: NavReading) -> float:
-        if -nav.d > self._p("LAND_ALT_LOW_M"):
-            high = self._p("LAND_SPD_HIGH_MS")
-            return high if high > 0 else self._p("WP_SPD_DN")
-        return self._p("LAND_SPD_MS")
 
     def _descent_demanded(self) -> bool:
         if self.throttle >= 0.85 * self._hover:

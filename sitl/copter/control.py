@@ -19,7 +19,8 @@ from collections.abc import Sequence
 
 from quadrotor.frames import euler_to_quaternion
 
-__all__ = ["attitude_rate_demand", "RateController", "ClimbRateController", "angle_boost", "land_attitude"]
+__all__ = ["attitude_rate_demand", "RateController", "ClimbRateController", "angle_boost", "land_attitude",
+           "land_speed"]
 
 
 def attitude_rate_demand(q_target: Sequence[float], q_meas: Sequence[float], gains: Sequence[float],
@@ -186,3 +187,11 @@ def land_attitude(vn: float, ve: float, yaw: float, damping_1_s: float,
     fwd = cy * an + sy * ae
     right = -sy * an + cy * ae
     return euler_to_quaternion(math.atan(right / g), -math.atan(fwd / g), yaw)
+
+
+def land_speed(params, altitude_m: float) -> float:
+    """LAND's descent speed [m/s] at ``altitude_m`` above home (``LAND_SPD_HIGH_MS`` or ``WP_SPD_DN`` high up)."""
+    if altitude_m > params["LAND_ALT_LOW_M"]:
+        high = params["LAND_SPD_HIGH_MS"]
+        return high if high > 0 else params["WP_SPD_DN"]
+    return params["LAND_SPD_MS"]

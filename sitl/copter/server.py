@@ -84,6 +84,8 @@ class SitlServer(LoopServer):
     prearm_delay_s : float
         Refuse arming for this long after boot (simulated time), like an
         autopilot whose estimator is settling.
+    emulate, ekf_ready_s
+        Passed to :class:`~sitl.copter.simulation.Simulation` (``--emulate arducopter``).
     """
 
     def __init__(self, transport: Transport | Sequence[Transport], *, vehicle: VehicleParams | str | None = None,
@@ -91,7 +93,8 @@ class SitlServer(LoopServer):
                  wind: WindParams | None = None, initial: InitialConditions | None = None,
                  params: Mapping[str, float] | None = None, signing_key: bytes | None = None,
                  signing_state: str | os.PathLike | None = None, radio: RadioParams | None = None,
-                 clock: Clock | None = None, loop_rate_hz: int = 400, prearm_delay_s: float = 0.0) -> None:
+                 clock: Clock | None = None, loop_rate_hz: int = 400, prearm_delay_s: float = 0.0,
+                 emulate: str | None = None, ekf_ready_s: float | None = None) -> None:
         transports = [transport] if isinstance(transport, Transport) else list(transport)
         try:
             if not transports:
@@ -102,7 +105,8 @@ class SitlServer(LoopServer):
             self._ticks_per_step = ticks_per_step(control_period_s, loop_rate_hz, "inner-loop")
             try:
                 self.sim = Simulation(v, seed=seed, wind=wind, initial=initial, params=params,
-                                      loop_rate_hz=loop_rate_hz, prearm_delay_s=prearm_delay_s)
+                                      loop_rate_hz=loop_rate_hz, prearm_delay_s=prearm_delay_s, emulate=emulate,
+                                      ekf_ready_s=ekf_ready_s)
             except ValueError as exc:
                 raise UsageError(str(exc)) from None
             self.counters = LinkCounters()

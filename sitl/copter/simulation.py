@@ -21,6 +21,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from quadrotor.wind import Wind, WindParams
+from sitl.copter.ardupilot_emulation import EMULATIONS
+from sitl.copter.ardupilot_emulation.autopilot import ArduCopterAutopilot
+from sitl.copter.ardupilot_emulation.status import EKF_READY_S
+from sitl.copter.ardupilot_emulation.vehicle import emulation_params
 from sitl.copter.autopilot import Autopilot
 from sitl.copter.params import ParamStore, ardupilot_params
 from sitl.copter.rigid_body import RigidBodyState, initial_state
@@ -76,23 +80,37 @@ class Simulation:
         Largest physics step.
     prearm_delay_s : float
         Simulated time after boot before arming is allowed (0 = at once).
+    emulate : {"arducopter"} or None
+        Fly ArduCopter's own inner loop, motors and start-up (:mod:`sitl.copter.ardupilot_emulation`;
+        its parameter table) instead of the built-in autopilot.
+    ekf_ready_s : float or None
+        With ``emulate``: when the emulated EKF is ready [s after boot] (default: as measured, ~41.6 s).
     """
 
     def __init__(self, vehicle: VehicleParams, *, seed: int = 0, wind: WindParams | None = None,
                  initial: InitialConditions | None = None, params: Mapping[str, float] | None = None,
-                 loop_rate_hz: int = 400, max_substep_s: float = 0.001, prearm_delay_s: float = 0.0) -> None:
+                 loop_rate_hz: int = 400, max_substep_s: float = 0.001, prearm_delay_s: float = 0.0,
+                 emulate: str | None = None, ekf_ready_s: float | None = None) -> None:
         if loop_rate_hz <= 0 or 1_000_000_000 % loop_rate_hz:
             raise ValueError(f"loop_rate_hz must divide 1e9 ns exactly, got {loop_rate_hz!r}")
         self.vehicle = vehicle
         self.seed = seed
         self.tick_ns = 1_000_000_000 // loop_rate_hz
         self.dt_s = self.tick_ns * 1e-9
-        self.params = ParamStore(ardupilot_params(vehicle), params)
+        if emulate not in (None, *EMULATIONS):
+            raise ValueError(f"emulate must be one of {EMULATIONS}, got {emulate!r}")
+        self.emulate = emulate
+        specs = emulation_params(vehicle) if emulate else ardupilot_params(vehicle)
+        self.params = ParamStore(specs, params)
         wind_model = Wind(wind, np.random.default_rng([seed, 1])) if wind is not None else None
         self.initial = initial or InitialConditions()
         self.world = World(vehicle, wind_model, self.initial.state(), max_substep_s)
         self.sensors = NedSensors(vehicle.sensors, np.random.default_rng([seed, 2]))
-        self.autopilot = Autopilot(vehicle, self.params, prearm_delay_s)
+        if emulate:
+            ready = EKF_READY_S if ekf_ready_s is None else ekf_ready_s
+            self.autopilot: Autopilot = ArduCopterAutopilot(vehicle, self.params, ready, self.dt_s)
+        else:
+            self.autopilot = Autopilot(vehicle, self.params, prearm_delay_s)
         self.time_ns = 0
         k = self.world.kinematics
         self.imu = self.sensors.imu(k)

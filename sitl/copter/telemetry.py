@@ -26,7 +26,6 @@ from collections.abc import Callable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from sitl.copter.modes import GUIDED_MODES
 from sitl.copter.simulation import Simulation
 
 __all__ = ["BUILDERS", "heartbeat", "build", "autopilot_version", "TelemetryCounters"]
@@ -68,11 +67,7 @@ def _ms(sim: Simulation) -> int:
 def heartbeat(sim: Simulation) -> mavlink.MAVLink_message:
     """HEARTBEAT of the current mode / arming state."""
     ap = sim.autopilot
-    base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_STABILIZE_ENABLED
-    if ap.mode in GUIDED_MODES:
-        base |= mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
-    if ap.armed:
-        base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+    base = ap.base_mode  # CUSTOM_MODE | STABILIZE (+ GUIDED) (+ SAFETY_ARMED); an emulation's own
     return mavlink.MAVLink_heartbeat_message(
         mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, base, int(ap.mode), ap.system_status, 3)
 
@@ -98,7 +93,9 @@ def _attitude_quaternion(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLi
                                                        [0.0, 0.0, 0.0, 0.0])
 
 
-def _local_position(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message:
+def _local_position(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message | None:
+    if not sim.autopilot.position_ready(sim.time_ns):
+        return None  # an emulated EKF not ready yet
     n = sim.nav
     return mavlink.MAVLink_local_position_ned_message(_ms(sim), n.n, n.e, n.d, n.vn, n.ve, n.vd)
 
@@ -186,8 +183,9 @@ def _attitude_target(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_m
 
 def autopilot_version(sim: Simulation) -> mavlink.MAVLink_message:
     """AUTOPILOT_VERSION (answer to MAV_CMD_REQUEST_MESSAGE 148 / REQUEST_AUTOPILOT_CAPABILITIES)."""
+    caps, version, custom = sim.autopilot.identity or (CAPABILITIES, FLIGHT_SW_VERSION, BUILTIN_SITL_MARK)
     return mavlink.MAVLink_autopilot_version_message(
-        CAPABILITIES, FLIGHT_SW_VERSION, 0, 0, 0, BUILTIN_SITL_MARK, [0] * 8, [0] * 8, 0, 0, 0, [0] * 18)
+        caps, version, 0, 0, 0, custom, [0] * 8, [0] * 8, 0, 0, 0, [0] * 18)
 
 
 BUILDERS: dict[int, Callable[[Simulation, TelemetryCounters], mavlink.MAVLink_message | None]] = {
