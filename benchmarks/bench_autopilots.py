@@ -6,7 +6,8 @@ Every controller (nlsoc, loc, pd) with the attitude and rates outputs flies outd
 ``--duration`` seconds (default 15: the 8 s take-off and 7 s of circle) on each vehicle: the built-in
 SITL in real time (``gcs fly``), ArduCopter and PX4 at ``--speedup`` (default 2) on the vehicle's clock
 (``--sitl arducopter`` / ``--sitl px4``; skipped where the firmware is absent: ``$GCS_ARDUCOPTER``,
-``$GCS_PX4`` or ``../shared``).  ``--quick``: nlsoc and pd with the attitude output only.
+``$GCS_PX4`` or ``../shared``).  ``--quick``: nlsoc and pd with the attitude output only;
+``--vehicles px4,...``: some of the vehicles.
 Per flight: RMS position error, J_e, J_u_hover, the steady-state error and overshoot (gcs sim's
 metrics, from the summary) and the liftoff delay, from the log: how long after the reference first
 rises 5 cm above the take-off point the vehicle does (the built-in SITL is the baseline).
@@ -82,9 +83,14 @@ def main(argv=None) -> int:
     ap.add_argument("--json", action="store_true", help="text on stderr, one JSON document on stdout")
     ap.add_argument("--duration", type=float, default=15.0, help="mission seconds per flight (default 15)")
     ap.add_argument("--speedup", type=float, default=2.0, help="speed-up of the firmware flights (default 2)")
+    ap.add_argument("--vehicles", default="builtin,arducopter,px4", help="of builtin,arducopter,px4 (default all)")
     args = ap.parse_args(argv)
+    wanted = set(args.vehicles.split(","))
+    if not wanted <= {"builtin", "arducopter", "px4"}:
+        ap.error(f"--vehicles: unknown {sorted(wanted - {'builtin', 'arducopter', 'px4'})}")
     vehicles = [("builtin", None), ("arducopter", locate_arducopter(ROOT.parent / "shared" / "arducopter")),
                 ("px4", locate_px4(ROOT.parent / "shared" / "px4"))]
+    vehicles = [v for v in vehicles if v[0] in wanted]
     controllers = ("nlsoc", "pd") if args.quick else ("nlsoc", "loc", "pd")
     outputs = ("attitude",) if args.quick else ("attitude", "rates")
     rows, results = [], []

@@ -26,7 +26,8 @@ Per flight (``K`` control steps, ``k = 0 .. K-1``; the record holds K + 1 states
     or over the last second of the flight when the flight ends before the hold does
     (``gcs sim --duration``); a flight cut during the takeoff ramp measures ramp lag.
 ``overshoot_m``
-    ``max(0, max z - z_setpoint)`` before landing.
+    ``max(0, max z - z_setpoint)`` before landing; ``J_e_setpoint`` and this take the set point
+    relative to the take-off point, as the mission is flown.
 ``rms_error_m``
     RMS of the position error over ``error_axes``.
 
@@ -119,7 +120,9 @@ def flight_metrics(rec: FlightRecord, config: Config, mission: Mission, cost: Co
     pos_err = r[:, axes] - s[:, axes]
     vel_err = r[:, [a + 3 for a in axes]] - s[:, [a + 3 for a in axes]]
     err = np.hstack([pos_err, vel_err])
-    z_sp = mission.setpoint_z_m
+    # The mission is flown from the take-off point (a real autopilot's local origin need not be there,
+    # PX4's altitude estimate on the ground is often tenths of a metre off): the set point moves with it.
+    z_sp = mission.setpoint_z_m + (float(r[0, 2]) - mission.reference(0.0).z if len(r) else 0.0)
     out: dict[str, float] = {}
     if cost is not None:
         out["J"] = flight_cost(rec.state, rec.ref, rec.command, cost, mass, g)

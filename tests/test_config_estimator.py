@@ -21,7 +21,7 @@ def with_estimator(raw, **keys):
 
 def test_the_default_is_auto(raw):
     est = parse_config(raw, "t").estimator
-    assert est.disturbance == "auto" and est.disturbance_time_constant_s == 2.0
+    assert est.disturbance == "auto" and est.disturbance_time_constant_s == 0.15
     assert DISTURBANCE_MODES == ("auto", "on", "off")
 
 

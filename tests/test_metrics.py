@@ -39,6 +39,20 @@ def test_hand_computed_metrics(outdoor):
     assert m["steady_state_error_m"] == pytest.approx(np.mean([1.0 - 1.2, 1.0 - 1.0]))
 
 
+def test_a_take_off_point_above_the_origin_moves_the_set_point_with_it(outdoor):
+    """PX4's altitude estimate on the ground is often 0.5 m off: the mission is flown from there, and the
+    set-point metrics are those of the same flight from z = 0."""
+    mission = Mission([PhaseConfig("takeoff", 0.2, z_m=1.0), PhaseConfig("hold", 0.2)])
+    z, vz = np.array([0.0, 0.5, 1.2, 1.0, 1.0]), np.array([0.0, 1.0, 0.0, 0.0, 0.0])
+    base, high = record(z, vz, [10.0, 12.0, 8.0, 9.81]), record(z + 0.5, vz, [10.0, 12.0, 8.0, 9.81])
+    base.ref[:, 2] = [0.0, 0.5, 1.0, 1.0, 1.0]
+    high.ref[:, 2] = base.ref[:, 2] + 0.5
+    a, b = flight_metrics(base, outdoor, mission, None), flight_metrics(high, outdoor, mission, None)
+    for name in ("overshoot_m", "J_e_setpoint", "steady_state_error_m", "J_e", "rms_error_m"):
+        assert b[name] == pytest.approx(a[name]), name
+    assert b["overshoot_m"] == pytest.approx(0.2)
+
+
 def test_steady_state_falls_back_to_the_end_of_a_short_flight(outdoor):
     mission = Mission([PhaseConfig("takeoff", 0.2, z_m=1.0), PhaseConfig("hold", 100.0)])
     rec = record(np.array([0.0, 0.5, 0.9, 1.0, 1.0]), np.zeros(5), [9.81] * 4)

@@ -177,6 +177,15 @@ def test_configure_sets_the_offboard_loss_failsafe_and_reads_the_adapters_values
         Px4Profile().configure(_Params(dict(params.values, MPC_THR_HOVER=0.0)), None, "attitude")
 
 
+def test_the_drag_of_a_vehicle_px4_simulates_itself_comes_from_sih():
+    base = {"COM_OBL_RC_ACT": 4, "COM_OF_LOSS_T": 0.5, "COM_DISARM_LAND": 2.0, "MPC_THR_HOVER": 0.5}
+    assert Px4Profile().configure(_Params(base), None).drag_1_s is None  # a real vehicle: the config's
+    sih = _Params(dict(base, SIH_KDV=1.0, SIH_MASS=2.0))
+    assert Px4Profile().configure(sih, None).drag_1_s == pytest.approx(0.5)
+    assert any("SIH_KDV" in t for t in sih.said_lines)
+    assert Px4Profile().configure(_Params(dict(base, SIH_KDV=1.0, SIH_MASS=0.0)), None).drag_1_s is None
+
+
 def test_mode_commands_use_px4s_main_and_sub_modes_and_nav_land():
     p = Px4Profile()
     assert p._mode_command(OFFBOARD) == (mavlink.MAV_CMD_DO_SET_MODE, [1.0, 6.0, 0.0])

@@ -248,9 +248,10 @@ class MavlinkSession:
         est = self.config.estimator
         observe = est.disturbance == "on" or (est.disturbance == "auto" and not self.firmware.builtin_sitl)
         tau = est.disturbance_time_constant_s
-        self.estimator.disturbance = (DisturbanceObserver(tau, velocity_bias_time_constant_s=tau,
-                                                          drag_1_s=self.config.vehicle.drag_n_per_m_s
-                                                          / self.config.vehicle.mass_kg) if observe else None)
+        v = self.config.vehicle
+        drag = out.drag_1_s if out.drag_1_s is not None else v.drag_n_per_m_s / v.mass_kg
+        self.estimator.disturbance = (DisturbanceObserver(tau, velocity_bias_time_constant_s=tau, drag_1_s=drag)
+                                      if observe else None)
         self.event("output", f"{self.output_kind}: hover throttle {out.hover_throttle:.3f}, "
                              f"angle gains ({', '.join(f'{g:.4g}' for g in out.angle_gain_1_s)}), rate demand gains "
                              f"{self.config.flight.rate_gain_1_s}; "

@@ -42,6 +42,9 @@ class OutputParams:
         Body-rate limits [rad/s] (0: none).
     output : str or None
         The output the parameters were set for (None: not yet; see the profile's ``configure_output``).
+    drag_1_s : float or None
+        Linear drag per unit mass [1/s] where the autopilot knows its vehicle's (PX4's simulator SIH:
+        SIH_KDV / SIH_MASS); None: the config's ``[vehicle] drag_n_per_m_s / mass_kg``.
     """
 
     hover_throttle: float
@@ -49,6 +52,7 @@ class OutputParams:
     angle_accel_limit_rad_s2: tuple[float, float, float] = (0.0, 0.0, 0.0)
     rate_limit_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
     output: str | None = None
+    drag_1_s: float | None = None
 
 
 def optional_param(params, name: str) -> float | None:

@@ -19,7 +19,8 @@ is sent to the other):
 
   and read for the output adapters: MPC_THR_HOVER (the thrust that holds the vehicle),
   MC_ROLL_P/MC_PITCH_P/MC_YAW_P (the angle loop is linear: ``omega = P e``, no square-root
-  limit), MC_ROLLRATE_MAX/MC_PITCHRATE_MAX/MC_YAWRATE_MAX (rate limits, deg/s);
+  limit), MC_ROLLRATE_MAX/MC_PITCHRATE_MAX/MC_YAWRATE_MAX (rate limits, deg/s), and where PX4
+  simulates the vehicle itself (SIH) its drag SIH_KDV / SIH_MASS for the disturbance observer;
 * SET_ATTITUDE_TARGET: type_mask 7 makes an attitude setpoint (the rates are not a
   feed-forward: with them PX4 publishes a separate rates setpoint), type_mask 128 a rates
   setpoint; the thrust field is the normalised collective thrust, ``u / (m g) * MPC_THR_HOVER``;
@@ -117,8 +118,22 @@ class Px4Profile:
                                                                           ("YAW", 200.0)))
         if min(rate_max) < 0:
             raise PreflightRefused(f"MC_ROLLRATE_MAX/MC_PITCHRATE_MAX/MC_YAWRATE_MAX = {rate_max}: negative limits")
-        out = OutputParams(hover, gains, (0.0, 0.0, 0.0), tuple(r * _DEG for r in rate_max))  # type: ignore[arg-type]
+        out = OutputParams(hover, gains, (0.0, 0.0, 0.0), tuple(r * _DEG for r in rate_max),  # type: ignore[arg-type]
+                           drag_1_s=self.simulated_drag(params))
         return out if output is None else self.configure_output(params, output, firmware, out)
+
+    @staticmethod
+    def simulated_drag(params) -> float | None:
+        """SIH_KDV / SIH_MASS [1/s] where PX4 simulates its own vehicle (SITL with SIH, or SIH on a
+        flight controller): that vehicle's linear drag per unit mass, the disturbance observer's drag
+        model.  None on a real vehicle (no SIH parameters) or implausible values."""
+        kdv = optional_param(params, "SIH_KDV")
+        mass = optional_param(params, "SIH_MASS") if kdv is not None else None
+        if kdv is None or mass is None or not (0.0 <= kdv <= 100.0 and 0.01 <= mass <= 1000.0):
+            return None
+        drag = kdv / mass
+        params.said(f"drag {drag:.3g} 1/s from SIH_KDV / SIH_MASS (PX4 simulates this vehicle)")
+        return drag
 
     def configure_output(self, params, output: str, firmware, out: OutputParams) -> OutputParams:
         """What ``output`` needs: PX4 needs no parameter per output; ``actuator`` refused where not taken."""
