@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import signal
 import socket
 import subprocess
 import tempfile
@@ -27,6 +26,7 @@ import time
 from pathlib import Path
 
 from gcs.link.mavlink import LinkError
+from gcs.vehicles.firmware_child import FirmwareChild
 
 __all__ = ["ENV_VAR", "HOME", "ArduCopterSitl", "find_arducopter", "locate_arducopter"]
 
@@ -90,7 +90,7 @@ def free_instance() -> int:
     raise LinkError(f"no free ArduCopter SITL instance among the first {MAX_INSTANCES} (TCP 5760 + 10 N busy)")
 
 
-class ArduCopterSitl:
+class ArduCopterSitl(FirmwareChild):
     """One ArduCopter SITL child process.
 
     Parameters
@@ -171,36 +171,8 @@ class ArduCopterSitl:
         self.stop()
         raise LinkError(f"{self.name} did not listen on tcp 127.0.0.1:{port} within {timeout_s:g} s")
 
-    def _last_log_line(self) -> str:
-        try:
-            lines = self.log_path.read_bytes()[-4096:].decode(errors="replace").strip().splitlines()
-        except OSError:
-            return ""
-        return lines[-1].strip() if lines else ""
-
-    def exit_reason(self) -> str | None:
-        """None while it runs; once it has exited, its exit code and last log line."""
-        if self._exit_text is not None:
-            return self._exit_text
-        if self.proc is None or self.proc.poll() is None:
-            return None
-        last = self._last_log_line()
-        self._exit_text = f"{self.name} exited with code {self.proc.returncode}" + (f": {last}" if last else "")
-        return self._exit_text
-
-    def check_alive(self) -> None:
-        why = self.exit_reason()
-        if why is not None:
-            raise LinkError(why)
-
     def stop(self, timeout_s: float = 5.0, keep_workdir: bool = False) -> None:
-        if self.proc is not None and self.proc.poll() is None:
-            try:
-                os.killpg(self.proc.pid, signal.SIGTERM)
-                self.proc.wait(timeout_s)
-            except (ProcessLookupError, subprocess.TimeoutExpired):
-                self.proc.kill()
-                self.proc.wait(timeout_s)
+        self._stop_process(timeout_s)
         if self._own_dir and not keep_workdir:
             shutil.rmtree(self.workdir, ignore_errors=True)
 

@@ -42,7 +42,7 @@ import math
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.errors import PreflightRefused
-from gcs.vehicles.profile import OutputParams, optional_param
+from gcs.vehicles.profile import OutputParams, control_lost, optional_param
 from quadrotor.mavlink.modes import COPTER_MODES, copter_mode_name
 
 __all__ = ["ArduPilotProfile", "OutputParams", "GUID_TIMEOUT_S", "FS_GCS_LAND", "FS_GCS_TIMEOUT_S",
@@ -217,13 +217,7 @@ class ArduPilotProfile:
                 raise PreflightRefused(f"the vehicle did not accept FS_GCS_TIMEOUT = {FS_GCS_TIMEOUT_S:g} s")
             params.said(f"FS_GCS_TIMEOUT {timeout:g} -> {FS_GCS_TIMEOUT_S:g} s")
 
-    def control_lost(self, status) -> str | None:
-        """Why the vehicle no longer takes our setpoints, or None."""
-        if not status.armed:
-            return "disarmed"
-        if status.custom_mode not in self.control_modes:
-            return f"mode {self.mode_name(status.custom_mode)}"
-        return None
+    control_lost = control_lost
 
     @staticmethod
     def spool_up_s(params, firmware) -> float:

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 from gcs.link.mavlink import LinkError
 
-__all__ = ["OutputParams", "optional_param"]
+__all__ = ["OutputParams", "optional_param", "control_lost"]
 
 
 @dataclass(frozen=True)
@@ -63,3 +63,13 @@ def optional_param(params, name: str) -> float | None:
     except LinkError:
         return None
     return value if math.isfinite(value) else None
+
+
+def control_lost(profile, status) -> str | None:
+    """Why the vehicle no longer takes ``profile``'s setpoints (disarmed, or not in one of its
+    ``control_modes``, by its own mode names), or None.  Both profiles' ``control_lost``."""
+    if not status.armed:
+        return "disarmed"
+    if status.custom_mode not in profile.control_modes:
+        return f"mode {profile.mode_name(status.custom_mode)}"
+    return None

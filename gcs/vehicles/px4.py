@@ -38,7 +38,7 @@ import math
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.errors import PreflightRefused
-from gcs.vehicles.profile import OutputParams, optional_param
+from gcs.vehicles.profile import OutputParams, control_lost, optional_param
 from gcs.vehicles.px4_modes import HOLD, LAND, OFFBOARD, px4_mode_name, split_mode
 
 __all__ = ["Px4Profile", "OFFBOARD_LOSS_S", "OBL_LAND"]
@@ -170,13 +170,7 @@ class Px4Profile:
                 raise PreflightRefused("the vehicle did not accept COM_DISARM_LAND = 2 s (disarm once landed)")
             params.said(f"COM_DISARM_LAND {disarm:g} -> 2 s (a landed vehicle disarms itself)")
 
-    def control_lost(self, status) -> str | None:
-        """Why the vehicle no longer takes our setpoints, or None."""
-        if not status.armed:
-            return "disarmed"
-        if status.custom_mode not in self.control_modes:
-            return f"mode {self.mode_name(status.custom_mode)}"
-        return None
+    control_lost = control_lost
 
     @staticmethod
     def spool_up_s(params, firmware) -> float:

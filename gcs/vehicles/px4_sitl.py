@@ -16,7 +16,6 @@ from __future__ import annotations
 import hashlib
 import os
 import shutil
-import signal
 import socket
 import subprocess
 import tarfile
@@ -25,6 +24,7 @@ import time
 from pathlib import Path
 
 from gcs.link.mavlink import LinkError
+from gcs.vehicles.firmware_child import FirmwareChild
 
 __all__ = ["ENV_VAR", "Px4Sitl", "find_px4", "locate_px4", "MAX_INSTANCE"]
 
@@ -136,7 +136,7 @@ def _locked(lock: Path) -> bool:
     return subprocess.run([fuser, str(lock)], capture_output=True).returncode == 0
 
 
-class Px4Sitl:
+class Px4Sitl(FirmwareChild):
     """One PX4 SITL + SIH child process.
 
     Parameters
@@ -215,39 +215,8 @@ class Px4Sitl:
         self.stop()
         raise LinkError(f"{self.name} did not finish starting within {timeout_s:g} s ({self._last_log_line()})")
 
-    def _last_log_line(self) -> str:
-        try:
-            lines = self.log_path.read_bytes()[-4096:].decode(errors="replace").strip().splitlines()
-        except OSError:
-            return ""
-        return lines[-1].strip() if lines else ""
-
-    def exit_reason(self) -> str | None:
-        """None while it runs; once it has exited, its exit code and last log line."""
-        if self._exit_text is not None:
-            return self._exit_text
-        if self.proc is None or self.proc.poll() is None:
-            return None
-        last = self._last_log_line()
-        self._exit_text = f"{self.name} exited with code {self.proc.returncode}" + (f": {last}" if last else "")
-        return self._exit_text
-
-    def check_alive(self) -> None:
-        why = self.exit_reason()
-        if why is not None:
-            raise LinkError(why)
-
     def stop(self, timeout_s: float = 5.0, keep_workdir: bool = False) -> None:
-        if self.proc is not None and self.proc.poll() is None:
-            try:
-                os.killpg(self.proc.pid, signal.SIGTERM)
-                self.proc.wait(timeout_s)
-            except (ProcessLookupError, subprocess.TimeoutExpired):
-                try:
-                    os.killpg(self.proc.pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-                self.proc.wait(timeout_s)
+        self._stop_process(timeout_s)
         if self.instance is not None:
             for leftover in (f"/tmp/px4_lock-{self.instance}", f"/tmp/px4-sock-{self.instance}"):
                 try:
