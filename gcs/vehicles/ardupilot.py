@@ -81,6 +81,8 @@ class ArduPilotProfile:
     stream_before_mode = False
     #: ArduCopter's own failsafes land (FS_GCS, GUID_TIMEOUT levels): no mode it takes by itself needs landing.
     hover_modes: tuple[int, ...] = ()
+    #: Streams asked for the log only (message id -> Hz): none; ArduCopter's link carries enough.
+    log_streams_hz: dict[int, float] = {}  # noqa: RUF012  read only
 
     @staticmethod
     def mode_name(custom_mode: int) -> str:

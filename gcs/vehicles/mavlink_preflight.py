@@ -171,9 +171,11 @@ class MavlinkPreflight:
                 self.s.event("warning", f"stream {mid} at {hz:g} Hz not accepted (MAV_RESULT {res})")
         # For the readiness report only (not every autopilot has it): not waited for.
         self.s.io.quietly(lambda: self.link.send_message_interval(mavlink.MAVLINK_MSG_ID_EKF_STATUS_REPORT, 1.0))
-        # For the log: what the autopilot's inner loop was asked (PX4 fills the body rates with its rate
-        # setpoint, ArduCopter with its own attitude controller's target).
-        self.s.io.quietly(lambda: self.link.send_message_interval(mavlink.MAVLINK_MSG_ID_ATTITUDE_TARGET, 50.0))
+        # For the log's map only (foxglove.LocationFix, gcs/log/foxglove.py), 5 Hz: not waited for.
+        self.s.io.quietly(lambda: self.link.send_message_interval(mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 5.0))
+        # For the log only, as the profile asks (PX4: its rate setpoint): not waited for.
+        for mid, hz in getattr(self.profile, "log_streams_hz", {}).items():
+            self.s.io.quietly(lambda mid=mid, hz=hz: self.link.send_message_interval(mid, hz))
 
     def _check_battery(self, min_v: float) -> None:
         st = self.telemetry.status

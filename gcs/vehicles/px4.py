@@ -68,6 +68,9 @@ class Px4Profile:
     stream_before_mode = True
     #: A vehicle that left our control for one of these is hovering by itself (a failsafe): land it.
     hover_modes = (HOLD,)
+    #: Streams asked for the log only (message id -> Hz): ATTITUDE_TARGET, which PX4 fills with its rate
+    #: setpoint (what its inner loop was asked).
+    log_streams_hz = {mavlink.MAVLINK_MSG_ID_ATTITUDE_TARGET: 50.0}  # noqa: RUF012  read only
 
     def __init__(self, events=None) -> None:
         self.events = events
