@@ -171,7 +171,7 @@ class MavlinkPreflight:
                 self.s.event("warning", f"stream {mid} at {hz:g} Hz not accepted (MAV_RESULT {res})")
         # For the readiness report only (not every autopilot has it): not waited for.
         self.s.io.quietly(lambda: self.link.send_message_interval(mavlink.MAVLINK_MSG_ID_EKF_STATUS_REPORT, 1.0))
-        # For the log's map only (foxglove.LocationFix, gcs/log/foxglove.py), 5 Hz: not waited for.
+        # For the log only (the vehicle's global position, for review on a map), 5 Hz: not waited for.
         self.s.io.quietly(lambda: self.link.send_message_interval(mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 5.0))
         # For the log only, as the profile asks (PX4: its rate setpoint): not waited for.
         for mid, hz in getattr(self.profile, "log_streams_hz", {}).items():
