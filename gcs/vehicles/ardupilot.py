@@ -42,7 +42,7 @@ import math
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.errors import PreflightRefused
-from gcs.vehicles.profile import OutputParams, control_lost, optional_param
+from gcs.vehicles.profile import OutputParams, control_lost, optional_param, refuse_untaken_actuator
 from quadrotor.mavlink.modes import COPTER_MODES, copter_mode_name
 
 __all__ = ["ArduPilotProfile", "OutputParams", "GUID_TIMEOUT_S", "FS_GCS_LAND", "FS_GCS_TIMEOUT_S",
@@ -175,10 +175,7 @@ class ArduPilotProfile:
     @staticmethod
     def check_output(output: str, firmware) -> None:
         """Refuse ``actuator`` where AUTOPILOT_VERSION says the firmware does not take it (unknown: flown)."""
-        if output == "actuator" and firmware is not None and firmware.takes_actuator_targets() is False:
-            raise PreflightRefused(f"{firmware.describe()} does not take SET_ACTUATOR_CONTROL_TARGET (its "
-                                   "AUTOPILOT_VERSION lacks MAV_PROTOCOL_CAPABILITY_SET_ACTUATOR_TARGET; ArduCopter "
-                                   "has no handler for it): fly --output attitude or rates")
+        refuse_untaken_actuator(output, firmware, "; ArduCopter has no handler for it")
 
     @staticmethod
     def _guided_timeout(params) -> None:

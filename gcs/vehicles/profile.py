@@ -20,9 +20,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from gcs.errors import PreflightRefused
 from gcs.link.mavlink import LinkError
 
-__all__ = ["OutputParams", "optional_param", "control_lost"]
+__all__ = ["OutputParams", "optional_param", "control_lost", "refuse_untaken_actuator"]
 
 
 @dataclass(frozen=True)
@@ -73,3 +74,17 @@ def control_lost(profile, status) -> str | None:
     if status.custom_mode not in profile.control_modes:
         return f"mode {profile.mode_name(status.custom_mode)}"
     return None
+
+
+def refuse_untaken_actuator(output: str, firmware, note: str = "") -> None:
+    """Refuse ``actuator`` where AUTOPILOT_VERSION says the firmware does not take it (unknown: flown).
+
+    Raises
+    ------
+    PreflightRefused
+        Naming the missing capability (``note``: the autopilot family's own reason, appended).
+    """
+    if output == "actuator" and firmware is not None and firmware.takes_actuator_targets() is False:
+        raise PreflightRefused(f"{firmware.describe()} does not take SET_ACTUATOR_CONTROL_TARGET (its "
+                               f"AUTOPILOT_VERSION lacks MAV_PROTOCOL_CAPABILITY_SET_ACTUATOR_TARGET{note}): fly "
+                               "--output attitude or rates")

@@ -38,7 +38,7 @@ import math
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.errors import PreflightRefused
-from gcs.vehicles.profile import OutputParams, control_lost, optional_param
+from gcs.vehicles.profile import OutputParams, control_lost, optional_param, refuse_untaken_actuator
 from gcs.vehicles.px4_modes import HOLD, LAND, OFFBOARD, px4_mode_name, split_mode
 
 __all__ = ["Px4Profile", "OFFBOARD_LOSS_S", "OBL_LAND"]
@@ -145,10 +145,7 @@ class Px4Profile:
 
     @staticmethod
     def check_output(output: str, firmware) -> None:
-        if output == "actuator" and firmware is not None and firmware.takes_actuator_targets() is False:
-            raise PreflightRefused(f"{firmware.describe()} does not take SET_ACTUATOR_CONTROL_TARGET (its "
-                                   "AUTOPILOT_VERSION lacks MAV_PROTOCOL_CAPABILITY_SET_ACTUATOR_TARGET): fly "
-                                   "--output attitude or rates")
+        refuse_untaken_actuator(output, firmware)
 
     @staticmethod
     def _offboard_loss(params) -> None:
