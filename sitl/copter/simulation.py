@@ -26,6 +26,7 @@ from sitl.copter.ardupilot_emulation.autopilot import ArduCopterAutopilot
 from sitl.copter.ardupilot_emulation.status import EKF_READY_S
 from sitl.copter.ardupilot_emulation.vehicle import emulation_params
 from sitl.copter.autopilot import Autopilot
+from sitl.copter.mission_store import Home, MissionStore
 from sitl.copter.params import ParamStore, ardupilot_params
 from sitl.copter.rigid_body import RigidBodyState, initial_state
 from sitl.copter.sensors import NedSensors
@@ -111,6 +112,10 @@ class Simulation:
             self.autopilot: Autopilot = ArduCopterAutopilot(vehicle, self.params, ready, self.dt_s)
         else:
             self.autopilot = Autopilot(vehicle, self.params, prearm_delay_s)
+        # Uploaded by the ground stations (sitl.copter.mission); flown in AUTO; home moved by DO_SET_HOME.
+        self.missions = MissionStore()
+        h = vehicle.home
+        self.home = Home(h.lat_deg, h.lon_deg, h.alt_m)
         self.time_ns = 0
         k = self.world.kinematics
         self.imu = self.sensors.imu(k)
