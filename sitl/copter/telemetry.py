@@ -26,11 +26,11 @@ from collections.abc import Callable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from quadrotor.geodesy import geodetic_from_local
 from sitl.copter.simulation import Simulation
 
 __all__ = ["BUILDERS", "heartbeat", "build", "autopilot_version", "TelemetryCounters"]
 
-_EARTH_RADIUS_M = 6378137.0
 _UINT16_MAX = 65535
 
 # MAV_SYS_STATUS_SENSOR bits reported present/enabled/healthy.
@@ -107,8 +107,7 @@ def _heading_cdeg(sim: Simulation) -> int:
 def _global_position(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message:
     n = sim.nav
     h = sim.vehicle.home
-    lat = h.lat_deg + math.degrees(n.n / _EARTH_RADIUS_M)
-    lon = h.lon_deg + math.degrees(n.e / (_EARTH_RADIUS_M * math.cos(math.radians(h.lat_deg))))
+    lat, lon = geodetic_from_local(h.lat_deg, h.lon_deg, n.n, n.e)
     return mavlink.MAVLink_global_position_int_message(
         _ms(sim), int(round(lat * 1e7)), int(round(lon * 1e7)), int(round((h.alt_m - n.d) * 1000)),
         int(round(-n.d * 1000)), int(round(n.vn * 100)), int(round(n.ve * 100)), int(round(n.vd * 100)),
