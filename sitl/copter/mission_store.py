@@ -53,6 +53,8 @@ class MissionStore:
 
     items: dict[int, list[MissionItem]] = field(default_factory=lambda: {t: [] for t in MISSION_TYPES})
     current_seq: int = 0
+    #: Items AUTO has reached, oldest first; the MAVLink side drains it into MISSION_ITEM_REACHED.
+    reached: list[int] = field(default_factory=list)
 
     def replace(self, mission_type: int, items: list[MissionItem]) -> None:
         """A completed upload: the list of ``mission_type`` becomes ``items`` (re-numbered 0..n-1)."""
