@@ -23,13 +23,14 @@ import numpy as np
 from quadrotor.wind import Wind, WindParams
 from sitl.copter.ardupilot_emulation import EMULATIONS
 from sitl.copter.ardupilot_emulation.autopilot import ArduCopterAutopilot
+from sitl.copter.ardupilot_emulation.ekf import EkfHeight
 from sitl.copter.ardupilot_emulation.status import EKF_READY_S
 from sitl.copter.ardupilot_emulation.vehicle import emulation_params
 from sitl.copter.autopilot import Autopilot
 from sitl.copter.mission_store import Home, MissionStore
 from sitl.copter.params import ParamStore, ardupilot_params
 from sitl.copter.rigid_body import RigidBodyState, initial_state
-from sitl.copter.sensors import NedSensors
+from sitl.copter.sensors import NavReading, NedSensors
 from sitl.copter.vehicle import VehicleParams
 from sitl.copter.world import World
 
@@ -119,7 +120,9 @@ class Simulation:
         self.time_ns = 0
         k = self.world.kinematics
         self.imu = self.sensors.imu(k)
-        self.nav = self.sensors.nav(k)
+        # With the emulation, the height estimate is the firmware EKF's: late and offset.
+        self._height = EkfHeight(k.d) if emulate else None
+        self.nav = self._estimate(self.sensors.nav(k), k.d, 0.0)
         self.autopilot.observe(self.imu, self.nav, self.world.battery)
 
     @property
@@ -134,4 +137,7 @@ class Simulation:
         self.time_ns += self.tick_ns
         k = self.world.kinematics
         self.imu = self.sensors.imu(k)
-        self.nav = self.sensors.nav(k)
+        self.nav = self._estimate(self.sensors.nav(k), k.d, self.dt_s)
+
+    def _estimate(self, nav: NavReading, true_d_m: float, dt_s: float) -> NavReading:
+        return nav if self._height is None else self._height.apply(nav, true_d_m, dt_s)
