@@ -124,7 +124,8 @@ def _open_log(spec: FlightSpec, config: Config) -> FlightRecorder:
     path = Path(spec.log_path) if spec.log_path else default_log_path(spec.controller, config.experiment.name)
     ticks = int(Mission(config.mission).duration_s / config.experiment.ts_s) + 6000  # + preflight and landing
     try:
-        log = BackgroundSink(path, expected_bytes=ticks * BYTES_PER_FLIGHT_TICK)
+        log = BackgroundSink(path, expected_bytes=ticks * BYTES_PER_FLIGHT_TICK,
+                             **({"live": spec.live} if spec.live else {}))  # gcs fly --live: the writer serves it
     except LogError as exc:
         raise PreflightRefused(f"{exc} (--log PATH writes elsewhere, --no-log writes none)") from None
     rec = FlightRecorder(log)

@@ -196,8 +196,8 @@ def draw_figures(results: Sequence[Any], out_dir: str | Path, *, workers: int = 
     import importlib.util
 
     if importlib.util.find_spec("matplotlib") is None:
-        return {"files": [], "skipped": "matplotlib is not installed (pip install 'quadrotor-gcs[plot]')",
-                "problems": []}
+        return {"files": [], "skipped": "matplotlib is not installed (a dependency of quadrotor-gcs: "
+                                        "pip install -e . or pip install matplotlib)", "problems": []}
     reps = representative_runs(results)
     if not reps:
         return {"files": [], "skipped": "no completed run has a flight log", "problems": []}

@@ -15,6 +15,7 @@ from gcs.control import CONTROLLERS
 from gcs.flight.context import Interrupts
 from gcs.flight.result import EXIT_CODES, FlightResult
 from gcs.link.keys import read_signing_key
+from gcs.log.foxglove_live import live_argument
 from gcs.report import format_table
 from gcs.vehicles.arducopter_sitl import ENV_VAR as ARDUCOPTER_ENV
 from gcs.vehicles.px4_sitl import ENV_VAR as PX4_ENV
@@ -86,6 +87,9 @@ def add_fly_parser(sub) -> None:
     g.add_argument("--log", metavar="PATH",
                    help="MCAP flight log (default logs/<UTC time>_<controller>_<experiment>.mcap)")
     g.add_argument("--no-log", action="store_true", help="write no flight log")
+    f.add_argument("--live", type=live_argument, metavar="HOST:PORT", default=None,
+                   help="[HOST:]PORT: also serve the log's channels live on the Foxglove WebSocket protocol (HOST "
+                        "default 127.0.0.1; open ws://HOST:PORT in Foxglove)")
     f.add_argument("--quiet", "-q", action="store_true", help="only warnings, failsafes and the final table")
 
 
@@ -116,7 +120,7 @@ def spec_from_args(args: argparse.Namespace, command_line: str = "") -> FlightSp
         target_component=args.target_component,
         signing_key=read_signing_key(args.signing_key) if args.signing_key else None, output=args.output,
         telemetry_rate_hz=args.telemetry_rate, stale_timeout_s=args.stale_timeout, duration_s=args.duration,
-        force_budget=args.force_budget, log=not args.no_log, log_path=args.log,
+        force_budget=args.force_budget, log=not args.no_log, log_path=args.log, live=args.live,
         metadata={"command_line": command_line} if command_line else {})
 
 

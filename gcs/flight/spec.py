@@ -63,6 +63,9 @@ class FlightSpec:
         Fly a serial link whose budget does not fit.
     log : bool
         Write an MCAP flight log; ``log_path`` where (default ``logs/<UTC>_<controller>_<experiment>.mcap``).
+    live : str or None
+        ``[HOST:]PORT``: the log's channels served live there too, on the Foxglove WebSocket protocol
+        (:mod:`gcs.log.foxglove_live`; needs the log).
     metadata : dict
         Added to the log's ``flight`` metadata (e.g. the command line).
     """
@@ -90,6 +93,7 @@ class FlightSpec:
     force_budget: bool = False
     log: bool = True
     log_path: str | Path | None = None
+    live: str | None = None
     metadata: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -111,6 +115,8 @@ class FlightSpec:
             raise ConfigError("--ready-timeout", str(self.ready_timeout_s), "must be in 1..3600 s")
         if self.port is not None and self.connect is not None:
             raise ConfigError("--port/--connect", "", "give one of them, not both")
+        if self.live is not None and not self.log:
+            raise ConfigError("--live", self.live, "serves the flight log's channels: not with --no-log")
         if self.vehicle == "rig" and (self.connect is not None or self.signing_key is not None or self.output):
             raise ConfigError("--connect/--signing-key/--output", "", "not used with the rig (it takes CONTROL frames "
                                                                       "on a serial port: --port)")
@@ -172,6 +178,7 @@ class FlightSpec:
         if summary:
             out += ["--summary", summary]
         out += ["--log", str(self.log_path)] if self.log and self.log_path else ([] if self.log else ["--no-log"])
+        out += ["--live", self.live] if self.live else []
         return out
 
     def resolved_config(self) -> Config:

@@ -59,6 +59,10 @@ Topics (paper frame: x north, y east, z **up**; SI units; field names in the sch
 ``/rig/in/<NAME>``, ``/rig/out/<NAME>``, ``/rig/raw``
     The same for the 4-DOF rig's serial protocol (docs/rig-protocol.md): decoded messages and
     the escaped frames as on the wire; bytes that held no frame are ``GARBAGE``.
+``/foxglove/*``: ``tf``, ``vehicle_pose``, ``reference_pose``, ``reference_path``, ``location``, ``log``
+    Foxglove's well-known types (FrameTransform, PoseInFrame, PosesInFrame, LocationFix, Log) for its
+    3D, Map and Log panels, beside the channels above: world ENU / body FLU frames, the map track of
+    GLOBAL_POSITION_INT, the events and STATUSTEXT (:mod:`gcs.log.foxglove`; docs/foxglove-layout.json).
 
 Metadata record ``flight``: controller(s), experiment, config (path), software_version
 (``gcs.__version__``), start_time_utc, command line, and for simulations runs, seed, duration,
@@ -79,7 +83,8 @@ The pipeline (one for ``gcs fly`` and ``gcs sim``): a producer —
 sink (:mod:`~gcs.log.sink`): :class:`~gcs.log.sink.BackgroundSink` frames them
 (:mod:`~gcs.log.framing`) to the writer process ``python -m gcs.log.worker``
 (:mod:`~gcs.log.worker`), :class:`~gcs.log.sink.InlineSink` writes them in this process.
-Either way :class:`~gcs.log.encoder.RecordEncoder` turns each record into its messages
+Either way :class:`~gcs.log.foxglove_encoder.FoxgloveEncoder` (:class:`~gcs.log.encoder.RecordEncoder`
+plus the ``/foxglove/*`` channels) turns each record into its messages
 (:mod:`~gcs.log.jsonfmt`, :mod:`~gcs.log.linkframes`, stage costs by :mod:`gcs.control.cost`) on a
 :class:`~gcs.log.writer.FlightLog`, an MCAP file of :mod:`gcs.log.mcap` (the format layer:
 writer and robust reader, knowing nothing of flights).  The review tools (:mod:`gcs.log.review`)

@@ -37,7 +37,7 @@ from pathlib import Path
 from typing import Any
 
 from gcs.errors import LogError
-from gcs.log.encoder import RecordEncoder
+from gcs.log.foxglove_encoder import FoxgloveEncoder
 from gcs.log.framing import from_wire, pack, pack_wire, read_frame
 from gcs.log.mcap.writer import check_writable
 from gcs.log.records import Attachment, CloseLog, FlightStart, LogDone, LogFailed, Metadata, OpenLog
@@ -98,7 +98,7 @@ class InlineSink(_SinkBase):
     def __init__(self, log: FlightLog) -> None:
         self.log = log
         self.path = log.path
-        self.encoder = RecordEncoder(log)
+        self.encoder = FoxgloveEncoder(log)
         self.dropped = 0
         self.stats: dict = {}
 
@@ -310,7 +310,7 @@ class BackgroundSink(_SinkBase):
     max_pending : int
         ``"wait"``: frames queued here before the producer waits.
     **log_options
-        Passed to :class:`FlightLog` in the writer process.
+        To :class:`FlightLog` in the writer process; ``live`` (``[HOST:]PORT``, :mod:`gcs.log.foxglove_live`) too.
 
     Raises
     ------

@@ -3,12 +3,19 @@
 Every message is a JSON object; each topic has a ``jsonschema`` schema with the
 fields, their types and units (Foxglove Studio shows the descriptions).  See
 :mod:`gcs.log` for what each topic means.
+
+Beside these, the ``/foxglove/*`` topics carry Foxglove's well-known types (for its 3D, Map and Log
+panels), with the schemas vendored verbatim from Foxglove's published JSON schemas
+(``gcs/log/foxglove_schemas/``, see its SOURCE.md); :mod:`gcs.log.foxglove` says what they hold and in
+which frames.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 from collections.abc import Mapping
+from importlib import resources
 
 __all__ = [
     "COMMAND",
@@ -20,6 +27,14 @@ __all__ = [
     "EVENTS",
     "FIXED_FIELDS",
     "FLIGHT",
+    "FOXGLOVE_LOCATION",
+    "FOXGLOVE_LOG",
+    "FOXGLOVE_REFERENCE_PATH",
+    "FOXGLOVE_REFERENCE_POSE",
+    "FOXGLOVE_SCHEMAS",
+    "FOXGLOVE_TF",
+    "FOXGLOVE_TOPICS",
+    "FOXGLOVE_VEHICLE_POSE",
     "FLIGHT_METRICS",
     "HORIZON",
     "HORIZON_FIELDS",
@@ -37,6 +52,7 @@ __all__ = [
     "TIMING",
     "TIMING_FIELDS",
     "TRUTH",
+    "foxglove_schema_bytes",
     "mavlink_topic",
     "rig_topic",
     "schema_for",
@@ -64,6 +80,21 @@ MAVLINK_OUT = "/mavlink/out/"
 RIG_RAW = "/rig/raw"
 RIG_IN = "/rig/in/"
 RIG_OUT = "/rig/out/"
+
+# Foxglove well-known types (gcs.log.foxglove): frames, poses, the map track, the Log panel.
+FOXGLOVE_TF = "/foxglove/tf"
+FOXGLOVE_VEHICLE_POSE = "/foxglove/vehicle_pose"
+FOXGLOVE_REFERENCE_POSE = "/foxglove/reference_pose"
+FOXGLOVE_REFERENCE_PATH = "/foxglove/reference_path"
+FOXGLOVE_LOCATION = "/foxglove/location"
+FOXGLOVE_LOG = "/foxglove/log"
+#: The Foxglove schema (file name in gcs/log/foxglove_schemas/, without ``.json``) of each Foxglove topic;
+#: the MCAP schema name is ``foxglove.<name>``.
+FOXGLOVE_SCHEMAS: dict[str, str] = {
+    FOXGLOVE_TF: "FrameTransform", FOXGLOVE_VEHICLE_POSE: "PoseInFrame", FOXGLOVE_REFERENCE_POSE: "PoseInFrame",
+    FOXGLOVE_REFERENCE_PATH: "PosesInFrame", FOXGLOVE_LOCATION: "LocationFix", FOXGLOVE_LOG: "Log",
+}
+FOXGLOVE_TOPICS = tuple(FOXGLOVE_SCHEMAS)
 
 #: State fields in :class:`gcs.model.State` order (paper frame, z up) with units.
 STATE_FIELDS = ("x", "y", "z", "vx", "vy", "vz", "roll", "pitch", "yaw", "roll_rate", "pitch_rate", "yaw_rate")
@@ -174,11 +205,26 @@ def rig_topic(direction: str, msg_name: str) -> str:
     return f"/rig/{direction}/{msg_name}"
 
 
+@functools.cache
+def foxglove_schema_bytes(name: str) -> bytes:
+    """The vendored Foxglove JSON schema ``name`` (e.g. ``"FrameTransform"``) as shipped, byte for byte.
+
+    Raises
+    ------
+    FileNotFoundError
+        For a schema that is not vendored (an installation without the package data).
+    """
+    return resources.files("gcs.log").joinpath("foxglove_schemas", f"{name}.json").read_bytes()
+
+
 def schema_for(topic: str) -> tuple[str, dict]:
     """``(schema name, jsonschema dict)`` of a topic; an open object schema for unknown topics."""
     known = _SCHEMAS.get(topic)
     if known is not None:
         return known
+    fox = FOXGLOVE_SCHEMAS.get(topic)
+    if fox is not None:
+        return f"foxglove.{fox}", json.loads(foxglove_schema_bytes(fox))
     if topic.startswith((MAVLINK_IN, MAVLINK_OUT)):
         msg_type = topic.rsplit("/", 1)[-1]
         return (f"mavlink.{msg_type}", _obj(msg_type, "MAVLink message fields as decoded by pymavlink", {}, extra=True))
@@ -190,6 +236,9 @@ def schema_for(topic: str) -> tuple[str, dict]:
 
 
 def schema_json(topic: str) -> tuple[str, bytes]:
-    """``(schema name, schema as JSON bytes)`` of a topic."""
+    """``(schema name, schema as JSON bytes)`` of a topic (a Foxglove one as vendored, byte for byte)."""
+    fox = FOXGLOVE_SCHEMAS.get(topic)
+    if fox is not None:
+        return f"foxglove.{fox}", foxglove_schema_bytes(fox)
     name, schema = schema_for(topic)
     return name, json.dumps(schema, separators=(",", ":")).encode()

@@ -3,7 +3,7 @@
 Reads frames of records (:mod:`gcs.log.framing`) from stdin — an
 :class:`~gcs.log.records.OpenLog` first, then any records of :mod:`gcs.log.records`, up to a
 :class:`~gcs.log.records.CloseLog` or the end of stdin (the producer died: the file is
-finished just the same) — writes them with :class:`gcs.log.encoder.RecordEncoder` and answers
+finished just the same) — writes them with :class:`gcs.log.foxglove_encoder.FoxgloveEncoder` and answers
 with one frame on stdout: :class:`~gcs.log.records.LogDone` (``{"messages", "bytes",
 "flights", "undecodable"}``) or :class:`~gcs.log.records.LogFailed`.  Ctrl-C is ignored: the
 producer decides when the log ends.
@@ -68,7 +68,7 @@ def _write(encoder: Any, inp: Any) -> str | None:
 def main() -> int:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     from gcs.errors import LogError
-    from gcs.log.encoder import RecordEncoder
+    from gcs.log.foxglove_encoder import FoxgloveEncoder
     from gcs.log.framing import read_frame, write_frame
     from gcs.log.records import LogDone, LogFailed, OpenLog
     from gcs.log.writer import FlightLog
@@ -78,20 +78,23 @@ def main() -> int:
     if not first or type(first[0]) is not OpenLog:
         return 2
     opened = first[0]
+    options = dict(opened.options)
+    live = options.pop("live", None)  # gcs fly --live [HOST:]PORT: served from here (gcs.log.foxglove_live)
     try:
-        log = FlightLog(opened.path, check=False, **opened.options)
+        log = FlightLog(opened.path, check=False, **options)
     except LogError as exc:
         write_frame(out, [LogFailed(str(exc))])
         return 1
     if opened.nice:
         with contextlib.suppress(OSError):
             os.nice(opened.nice)  # a background job: a real-time loop (and a SITL beside it) come first
-    encoder = RecordEncoder(log)
+    encoder = FoxgloveEncoder(log, live=live)
     error = _write(encoder, inp)
     try:
         log.close()
     except LogError as exc:
         error = error or str(exc)
+    encoder.close()
     try:
         if error is not None:
             write_frame(out, [LogFailed(error)])

@@ -10,6 +10,9 @@
     The paper's tables across logs: flights grouped by controller, mean ± std.
 ``gcs log export FILE --csv DIR``
     One CSV per channel, fields flattened.
+``gcs log channels FILE [--validate] [--json]``
+    Every channel: topic, schema, encodings, messages; ``--validate`` checks the Foxglove
+    well-known messages against the schemas in the file.
 
 All of them read truncated logs and say so (stderr, and ``truncated`` in JSON); input that is
 not an MCAP log is a one-line error (exit 1).
@@ -23,6 +26,7 @@ import sys
 from typing import Any
 
 from gcs.config import load_config
+from gcs.log.review.channels import format_channels, log_channels
 from gcs.log.review.export import export_csv
 from gcs.log.review.info import log_info
 from gcs.log.review.metrics import compare_logs, log_metrics
@@ -35,7 +39,7 @@ __all__ = ["add_log_parser", "cmd_log"]
 
 def add_log_parser(sub: Any) -> None:
     """Add ``gcs log`` and its actions to the main parser's subparsers."""
-    lg = sub.add_parser("log", help="review MCAP flight logs: info, metrics, plot, compare, export",
+    lg = sub.add_parser("log", help="review MCAP flight logs: info, metrics, plot, compare, export, channels",
                         description="Review MCAP flight logs written by gcs sim / gcs fly. Every action reads "
                                     "truncated logs (a killed writer) and says so.")
     actions = lg.add_subparsers(dest="log_command", metavar="ACTION", parser_class=type(lg))
@@ -64,6 +68,12 @@ def add_log_parser(sub: Any) -> None:
     x = actions.add_parser("export", help="one CSV per channel")
     x.add_argument("file")
     x.add_argument("--csv", required=True, metavar="DIR", help="directory for the CSV files")
+
+    ch = actions.add_parser("channels", help="every channel: topic, schema, encodings, message count")
+    ch.add_argument("file")
+    ch.add_argument("--validate", action="store_true",
+                    help="validate the Foxglove well-known messages against the schemas in the file (jsonschema)")
+    ch.add_argument("--json", action="store_true", help="print one JSON object")
 
 
 def _warn_truncated(file: str, truncated: bool, problem: str) -> None:
@@ -187,4 +197,10 @@ def cmd_log(args: argparse.Namespace) -> int:
             print(f"{c['csv']}: {c['rows']} rows ({c['topic']})")
         _warn_truncated(res["file"], res["truncated"], res["problem"])
         return 0
+    if action == "channels":
+        doc = log_channels(args.file, validate=args.validate)
+        print(json.dumps(doc) if args.json else format_channels(doc))
+        _warn_truncated(doc["file"], doc["truncated"], doc["problem"])
+        bad = sum(r.get("validation", {}).get("invalid", 0) for r in doc["channels"])
+        return 1 if bad else 0
     raise AssertionError(f"unknown gcs log action {action!r}")  # argparse only lets the known ones through

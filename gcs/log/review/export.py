@@ -1,4 +1,8 @@
-"""``gcs log export``: one CSV per channel, the JSON fields flattened into columns."""
+"""``gcs log export``: one CSV per channel, the JSON fields flattened into columns.
+
+A ``foxglove.PosesInFrame`` (``/foxglove/reference_path``: thousands of poses in one message) becomes one
+row per pose (its index in ``pose``), not one row of thousands of columns.
+"""
 
 from __future__ import annotations
 
@@ -75,6 +79,21 @@ def _fields_of(msgs: list, as_json: bool) -> tuple[list[tuple[int, dict]], list[
     return rows, columns
 
 
+def _one_row_per_pose(msgs: list) -> list[tuple[int, bytes]]:
+    """The poses of ``foxglove.PosesInFrame`` messages, one message each (``pose``: its index)."""
+    out = []
+    for t, data in msgs:
+        try:
+            doc = json.loads(data)
+            poses = doc.pop("poses")
+        except (ValueError, KeyError, AttributeError):  # not a PosesInFrame: as it is
+            out.append((t, data))
+            continue
+        for i, pose in enumerate(poses if isinstance(poses, list) else []):
+            out.append((t, json.dumps(dict(doc, pose=i, **(pose if isinstance(pose, dict) else {}))).encode()))
+    return out
+
+
 def _write_csv(target: Path, header: list[str], rows: list[tuple[int, dict]], columns: list[str], origin: int,
                flights: list) -> None:
     starts = [f.start_ns for f in flights]
@@ -113,7 +132,10 @@ def export_csv(path: str | os.PathLike, out_dir: str | os.PathLike) -> dict:
     taken: set[str] = set()
     written = []
     for topic in sorted(log.messages):
-        rows, columns = _fields_of(log.messages[topic], encodings.get(topic, "json") == "json")
+        msgs = log.messages[topic]
+        if topic == T.FOXGLOVE_REFERENCE_PATH:
+            msgs = _one_row_per_pose(msgs)
+        rows, columns = _fields_of(msgs, encodings.get(topic, "json") == "json")
         lead = ["log_time_ns", "t_s"] + (["flight"] if len(flights) > 1 else [])
         # A field called like a lead column keeps its data under a prefixed name.
         header = lead + [c if c not in lead else f"field.{c}" for c in columns]

@@ -1,4 +1,4 @@
-"""``gcs log plot``: one flight of a log as a PNG (matplotlib, Agg; an optional dependency).
+"""``gcs log plot``: one flight of a log as a PNG (matplotlib, Agg; a dependency of the main install).
 
 Six panels, SI units on every axis: altitude vs reference, x-y track vs reference,
 thrust, the three angular-acceleration commands, attitude (in degrees), velocities
@@ -24,7 +24,10 @@ __all__ = ["MATPLOTLIB_HINT", "PANELS", "plot_log"]
 #: Panel titles, in the order they are drawn (row by row).
 PANELS = ("Altitude", "x-y track", "Thrust command", "Angular acceleration commands", "Attitude", "Velocities")
 
-MATPLOTLIB_HINT = "gcs log plot needs matplotlib: pip install 'quadrotor-gcs[plot]' (or pip install matplotlib)"
+#: What a user whose installation lacks matplotlib (a dependency of quadrotor-gcs since the review must work
+#: after the main install) is told.
+MATPLOTLIB_HINT = ("gcs log plot needs matplotlib, a dependency of quadrotor-gcs missing here: reinstall it "
+                   "(pip install -e . in a checkout) or pip install matplotlib")
 
 
 def _figure_class() -> Any:
