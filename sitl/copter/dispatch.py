@@ -6,16 +6,28 @@ to send and whether the message ticks the lockstep clock.  Handled:
 =============================  ==============================================================
 SET_ATTITUDE_TARGET            guided target (:meth:`Autopilot.set_attitude_target`); lockstep tick
 SET_ACTUATOR_CONTROL_TARGET    group 0: normalised torques + thrust; lockstep tick
-COMMAND_LONG / COMMAND_INT     DO_SET_MODE (176), COMPONENT_ARM_DISARM (400), NAV_LAND (21),
-                               SET_MESSAGE_INTERVAL (511), GET_MESSAGE_INTERVAL (510),
-                               REQUEST_MESSAGE (512), REQUEST_AUTOPILOT_CAPABILITIES (520);
-                               COMMAND_ACK always, MAV_RESULT_UNSUPPORTED for anything else
+COMMAND_LONG / COMMAND_INT     :mod:`sitl.copter.dispatch_commands` (modes, arming, message
+                               intervals and requests, home, mission current, the navigation
+                               commands of :mod:`sitl.copter.dispatch_nav`); COMMAND_ACK always
 SET_MODE                       custom mode; COMMAND_ACK with command = 11 (as ArduPilot)
 REQUEST_DATA_STREAM            stream groups (``SR0_*`` parameters)
-PARAM_REQUEST_READ/LIST, _SET  PARAM_VALUE; a refused PARAM_SET echoes the unchanged value and
-                               says why in a STATUSTEXT ("Param write denied ...")
+PARAM_REQUEST_READ/LIST        PARAM_VALUE
+PARAM_SET                      as ArduPilot 4.8: the value is set even outside the documented
+                               range and echoed with ``param_index`` 65535 (-1); an unknown name
+                               or a non-finite value: PARAM_ERROR only; a read-only one:
+                               "Param write denied (NAME)" + PARAM_ERROR + the unchanged value
+MISSION_*                      the mission protocol (:mod:`sitl.copter.mission`)
+FILE_TRANSFER_PROTOCOL         MAVFTP (:mod:`sitl.copter.ftp`)
+SET_HOME_POSITION              home moved (and locked), HOME_POSITION to every link
+navigation messages            ``dispatch_nav.NAV_MESSAGES`` (position targets) -> ``nav_message``
 TIMESYNC                       request (tc1 = 0) answered with tc1 = simulated time [ns]
 =============================  ==============================================================
+
+Besides the replies, :attr:`Dispatcher.outbox` collects what goes out unasked, as
+``(link, message)`` (link None = every link): the mission protocol's repeated requests and
+cancellations (:meth:`Dispatcher.poll`, server clock), HOME_POSITION when home moves,
+MISSION_CURRENT when the current item changes and MISSION_ITEM_REACHED for every item AUTO
+reached (:meth:`Dispatcher.poll_vehicle`, every tick).  The server drains it.
 
 Messages whose ``target_system`` is neither 0 nor ours (or whose
 ``target_component`` is neither 0 nor ours) are ignored and counted;
@@ -31,20 +43,26 @@ Non-finite values (NaN, inf) where a number is used -- a SET_ATTITUDE_TARGET
 quaternion, rate or thrust that is not ignored by ``type_mask``, actuator
 controls, the parameters of the commands above, a PARAM_SET value -- refuse
 the message (targets: not applied; commands: MAV_RESULT_DENIED; parameters:
-unchanged, "Param write denied") and count it in ``LinkCounters.non_finite``.
+unchanged, PARAM_ERROR VALUE_OUT_OF_RANGE) and count it in ``LinkCounters.non_finite``.
 """
 
 from __future__ import annotations
 
 import math
+import time
+from collections.abc import Callable, Hashable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from sitl.copter.autopilot import FORCE_MAGIC, SEVERITY_WARNING
+from sitl.copter.autopilot import SEVERITY_WARNING
+from sitl.copter.dispatch_commands import NAV_MESSAGES, CommandsMixin, dispatch_nav
+from sitl.copter.ftp import FtpServer, ftp_message
+from sitl.copter.mission import MISSION_MESSAGES, MissionProtocol, mission_current
 from sitl.copter.params import STREAM_PARAMS
 from sitl.copter.simulation import Simulation
 from sitl.copter.streams import StreamScheduler
-from sitl.copter.telemetry import TelemetryCounters, autopilot_version, build
+from sitl.copter.telemetry import TelemetryCounters
+from sitl.copter.telemetry_nav import HomeTracker, home_position, set_home
 from sitl.net.endpoint import LinkCounters, MavlinkEndpoint
 
 __all__ = ["Dispatcher", "STEPPING_MESSAGES"]
@@ -54,11 +72,7 @@ STEPPING_MESSAGES = frozenset({"SET_ATTITUDE_TARGET", "SET_ACTUATOR_CONTROL_TARG
 # ATTITUDE_TARGET_TYPEMASK bits: body roll/pitch/yaw rate ignore 1/2/4, throttle 64, attitude 128
 _THROTTLE_IGNORE = 64
 _ATTITUDE_IGNORE = 128
-# How many leading parameters each handled command uses (all must be finite).
-_COMMAND_PARAMS = {M.MAV_CMD_DO_SET_MODE: 2, M.MAV_CMD_COMPONENT_ARM_DISARM: 2, M.MAV_CMD_SET_MESSAGE_INTERVAL: 2,
-                   M.MAV_CMD_GET_MESSAGE_INTERVAL: 1, M.MAV_CMD_REQUEST_MESSAGE: 1}
-_ACCEPTED, _DENIED, _FAILED, _UNSUPPORTED = (M.MAV_RESULT_ACCEPTED, M.MAV_RESULT_DENIED, M.MAV_RESULT_FAILED,
-                                            M.MAV_RESULT_UNSUPPORTED)
+_PARAM_INDEX_NONE = 65535  # ArduPilot's -1: a PARAM_VALUE that is not an answer to a read by index
 
 
 def _text(value) -> str:
@@ -67,7 +81,7 @@ def _text(value) -> str:
     return str(value)
 
 
-class Dispatcher:
+class Dispatcher(CommandsMixin):
     """Message handlers of one vehicle.
 
     Parameters
@@ -78,16 +92,28 @@ class Dispatcher:
     endpoint : MavlinkEndpoint
     telemetry_counters : TelemetryCounters
         Updated from the link counters for SYS_STATUS.
+    clock : callable or None
+        Monotonic time [ns] of the mission protocol's timeouts (default ``time.monotonic_ns``;
+        the server gives its clock).
     """
 
     def __init__(self, sim: Simulation, streams: StreamScheduler, endpoint: MavlinkEndpoint,
-                 telemetry_counters: TelemetryCounters) -> None:
+                 telemetry_counters: TelemetryCounters, clock: Callable[[], int] | None = None) -> None:
         self.sim = sim
         self.streams = streams
         self.endpoint = endpoint
         self.tcounters = telemetry_counters
         self.counters: LinkCounters = endpoint.counters
         self._link: StreamScheduler | None = None
+        self._key: Hashable | None = None
+        self._clock = clock or time.monotonic_ns
+        self.mission = MissionProtocol(sim, lambda: self.endpoint.system_id)
+        self.ftp = FtpServer(sim.params)
+        self.home = HomeTracker(sim)
+        #: Unasked messages ``(link or None for all, message)``; drained by the server.
+        self.outbox: list[tuple[Hashable | None, mavlink.MAVLink_message]] = []
+        self._current_sent = self._current_key()
+        self._commands = self._command_table()
         self._handlers = {
             "SET_ATTITUDE_TARGET": self._set_attitude_target,
             "SET_ACTUATOR_CONTROL_TARGET": self._set_actuator_control_target,
@@ -99,13 +125,19 @@ class Dispatcher:
             "PARAM_REQUEST_LIST": self._param_request_list,
             "PARAM_SET": self._param_set,
             "TIMESYNC": self._timesync,
+            "FILE_TRANSFER_PROTOCOL": self._ftp,
+            "SET_HOME_POSITION": self._set_home_position,
         }
+        for name in MISSION_MESSAGES:
+            self._handlers[name] = self._mission
+        for name in NAV_MESSAGES:
+            self._handlers[name] = self._nav_message
         sim.params.add_listener(self._param_changed)
 
     # ------------------------------------------------------------------ entry
-    def handle(self, msg: mavlink.MAVLink_message,
-               streams: StreamScheduler | None = None) -> tuple[list[mavlink.MAVLink_message], bool]:
-        """Act on ``msg`` received on the link whose stream rates are ``streams`` (default: the constructor's).
+    def handle(self, msg: mavlink.MAVLink_message, streams: StreamScheduler | None = None,
+               link: Hashable | None = None) -> tuple[list[mavlink.MAVLink_message], bool]:
+        """Act on ``msg`` received on ``link`` whose stream rates are ``streams`` (default: the constructor's).
 
         Returns
         -------
@@ -122,13 +154,44 @@ class Dispatcher:
             return [], False
         replies: list[mavlink.MAVLink_message] = []
         self._link = streams if streams is not None else self.streams
+        self._key = link
         try:
             handler(msg, replies)
         except Exception:  # noqa: BLE001 - a hostile field value must never stop the vehicle
             self.counters.handler_errors += 1
         finally:
             self._link = None
+            self._key = None
         return replies, kind in STEPPING_MESSAGES
+
+    def poll(self) -> None:
+        """Mission-protocol timeouts (server clock) into :attr:`outbox`."""
+        self.mission.poll(self._clock())
+        if self.mission.outbox:
+            self.outbox.extend(self.mission.outbox)
+            self.mission.outbox.clear()
+
+    def poll_vehicle(self) -> None:
+        """HOME_POSITION, MISSION_CURRENT and MISSION_ITEM_REACHED when due, into :attr:`outbox` (every link)."""
+        sim = self.sim
+        if self.home.poll():
+            hp = home_position(sim)
+            if hp is not None:
+                self.outbox.append((None, hp))
+        store = sim.missions
+        if store.reached:
+            for seq in store.reached:
+                self.outbox.append((None, M.MAVLink_mission_item_reached_message(seq & 0xFFFF)))
+            store.reached.clear()
+        key = self._current_key()
+        if key != self._current_sent:
+            self.outbox.append((None, mission_current(sim)))
+            self._current_sent = key
+
+    def _current_key(self) -> tuple[int, int, int, bool]:
+        """What MISSION_CURRENT shows: current item, mission length, mode, armed."""
+        store, ap = self.sim.missions, self.sim.autopilot
+        return store.current_seq, store.count(0), int(ap.mode), ap.armed
 
     def sync_counters(self) -> None:
         """Copy link counters into the SYS_STATUS counters."""
@@ -180,74 +243,13 @@ class Dispatcher:
             return
         self.sim.autopilot.set_actuator_controls(list(msg.controls), self._now)
 
-    # ------------------------------------------------------------------ commands
-    def _ack(self, msg, command: int, result: int, replies) -> None:
-        replies.append(M.MAVLink_command_ack_message(command, result, 0, 0, msg.get_srcSystem(),
-                                                     msg.get_srcComponent()))
-
-    def _command_long(self, msg, replies) -> None:
-        p = (msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6, msg.param7)
-        self._command(msg, int(msg.command), p, replies)
-
-    def _command_int(self, msg, replies) -> None:
-        p = (msg.param1, msg.param2, msg.param3, msg.param4, float(msg.x), float(msg.y), msg.z)
-        self._command(msg, int(msg.command), p, replies)
-
-    def _command(self, msg, cmd: int, p, replies) -> None:
-        ap = self.sim.autopilot
-        now = self._now
-        streams = self._link if self._link is not None else self.streams
-        needed = _COMMAND_PARAMS.get(cmd, 0)
-        if needed and self._non_finite(*p[:needed]):
-            self._ack(msg, cmd, _DENIED, replies)
-            return
-        if cmd == M.MAV_CMD_DO_SET_MODE:
-            if not int(p[0]) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-                result = _FAILED
-            else:
-                result = _ACCEPTED if ap.set_mode(int(p[1]), now)[0] else _FAILED
-        elif cmd == M.MAV_CMD_NAV_LAND:
-            result = _ACCEPTED if ap.set_mode(9, now)[0] else _FAILED
-        elif cmd == M.MAV_CMD_COMPONENT_ARM_DISARM:
-            force = int(p[1]) == FORCE_MAGIC
-            if p[0] == 1.0:
-                ok = ap.arm(now, force)[0]
-            elif p[0] == 0.0:
-                ok = ap.disarm(now, force)[0]
-            else:
-                ok = False
-            result = _ACCEPTED if ok else _FAILED
-        elif cmd == M.MAV_CMD_SET_MESSAGE_INTERVAL:
-            result = _ACCEPTED if streams.set_interval_us(int(p[0]), p[1], now) else _FAILED
-        elif cmd == M.MAV_CMD_GET_MESSAGE_INTERVAL:
-            # The field is int32: an interval set beyond it (a hostile request) reads back clamped.
-            interval = max(-1, min(int(streams.interval_us(int(p[0]))), 2**31 - 1))
-            replies.append(M.MAVLink_message_interval_message(int(p[0]) & 0xFFFF, interval))
-            result = _ACCEPTED
-        elif cmd == M.MAV_CMD_REQUEST_MESSAGE:
-            result = _FAILED
-            mid = int(p[0])
-            if mid == M.MAVLINK_MSG_ID_SYS_STATUS:
-                self.sync_counters()  # as the streamed one: the link counters of now
-            m = autopilot_version(self.sim) if mid == M.MAVLINK_MSG_ID_AUTOPILOT_VERSION else build(
-                mid, self.sim, self.tcounters)
-            if m is not None:
-                self._ack(msg, cmd, _ACCEPTED, replies)
-                replies.append(m)
-                return
-        elif cmd == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
-            self._ack(msg, cmd, _ACCEPTED, replies)
-            replies.append(autopilot_version(self.sim))
-            return
-        else:
-            result = _UNSUPPORTED
-        self._ack(msg, cmd, result, replies)
-
+    # ------------------------------------------------------------------ modes, streams
     def _set_mode(self, msg, replies) -> None:
         ok = False
         if int(msg.base_mode) & M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
             ok = self.sim.autopilot.set_mode(int(msg.custom_mode), self._now)[0]
-        replies.append(M.MAVLink_command_ack_message(M.MAVLINK_MSG_ID_SET_MODE, _ACCEPTED if ok else _FAILED, 0, 0,
+        replies.append(M.MAVLink_command_ack_message(M.MAVLINK_MSG_ID_SET_MODE,
+                                                     M.MAV_RESULT_ACCEPTED if ok else M.MAV_RESULT_FAILED, 0, 0,
                                                      msg.get_srcSystem(), msg.get_srcComponent()))
 
     def _request_data_stream(self, msg, replies) -> None:
@@ -260,7 +262,7 @@ class Dispatcher:
 
     # ------------------------------------------------------------------ parameters
     def _param_changed(self, name: str, value: float) -> None:
-        if name == "SYSID_THISMAV":
+        if name == "SYSID_THISMAV" and 1 <= value <= 255:
             self.endpoint.system_id = int(value)
         if self._link is None:  # not changed by a link (start-up overrides): no link's rates change
             return
@@ -268,10 +270,10 @@ class Dispatcher:
             if pname == name:
                 self._link.set_group_rate(sid, value, self._now)
 
-    def _param_value(self, name: str) -> mavlink.MAVLink_message:
+    def _param_value(self, name: str, index: int | None = None) -> mavlink.MAVLink_message:
         ps = self.sim.params
         return M.MAVLink_param_value_message(name.encode("ascii"), ps[name], ps.spec(name).ptype, len(ps),
-                                             ps.index(name))
+                                             ps.index(name) if index is None else index)
 
     def _param_request_read(self, msg, replies) -> None:
         ps = self.sim.params
@@ -285,23 +287,45 @@ class Dispatcher:
     def _param_request_list(self, msg, replies) -> None:
         replies.extend(self._param_value(name) for name in self.sim.params)
 
+    def _param_error(self, msg, name: str, error: int, replies) -> None:
+        replies.append(M.MAVLink_param_error_message(msg.get_srcSystem(), msg.get_srcComponent(),
+                                                     name.encode("ascii", "replace")[:16], -1, error))
+
     def _param_set(self, msg, replies) -> None:
         ps = self.sim.params
         name = _text(msg.param_id)
         if name not in ps:
             self.counters.unhandled += 1
-            self.sim.autopilot.events.append((SEVERITY_WARNING, f"Param write denied ({name[:16]}): unknown"))
+            self._param_error(msg, name, M.MAV_PARAM_ERROR_DOES_NOT_EXIST, replies)
             return
         if self._non_finite(float(msg.param_value)):
-            ok, reason = False, f"not finite: {float(msg.param_value)!r}"
-        else:
-            ok, reason = ps.set(name, msg.param_value)
-        if not ok:
-            self.sim.autopilot.events.append((SEVERITY_WARNING, f"Param write denied ({name}): {reason}"[:50]))
-        replies.append(self._param_value(name))
+            self._param_error(msg, name, M.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE, replies)
+            return
+        ok, _reason = ps.set(name, msg.param_value, check_range=False)
+        if not ok:  # read-only
+            self.sim.autopilot.events.append((SEVERITY_WARNING, f"Param write denied ({name})"))
+            self._param_error(msg, name, M.MAV_PARAM_ERROR_PERMISSION_DENIED, replies)
+        replies.append(self._param_value(name, _PARAM_INDEX_NONE))
 
     # ------------------------------------------------------------------ misc
     def _timesync(self, msg, replies) -> None:
         if int(msg.tc1) == 0:
             replies.append(M.MAVLink_timesync_message(self._now, int(msg.ts1)))
 
+    # ------------------------------------------------------------------ mission, FTP, home, navigation
+    def _mission(self, msg, replies) -> None:
+        self.mission.handle(msg, self._key, self._clock(), replies)
+
+    def _ftp(self, msg, replies) -> None:
+        if int(msg.target_network) != 0:
+            return
+        for payload in self.ftp.handle(msg.payload):
+            replies.append(ftp_message(payload, msg.get_srcSystem(), msg.get_srcComponent()))
+
+    def _set_home_position(self, msg, replies) -> None:
+        lat, lon, alt = int(msg.latitude) * 1e-7, int(msg.longitude) * 1e-7, int(msg.altitude) * 1e-3
+        if self.sim.autopilot.position_ready(self._now) and set_home(self.sim, lat, lon, alt, lock=True):
+            self.poll_vehicle()
+
+    def _nav_message(self, msg, replies) -> None:
+        dispatch_nav.nav_message(self.sim, msg, self._now)

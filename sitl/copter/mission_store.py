@@ -40,11 +40,17 @@ class MissionItem:
 
 @dataclass
 class Home:
-    """Home position: latitude/longitude [deg], altitude AMSL [m]; set at boot and by DO_SET_HOME."""
+    """Home position: latitude/longitude [deg], altitude AMSL [m]; set at boot and by DO_SET_HOME.
+
+    ``is_set`` becomes True once the estimator is ready (ArduPilot's ``home_is_set``); ``locked`` by
+    DO_SET_HOME / SET_HOME_POSITION (arming then no longer moves it, as ArduCopter).
+    """
 
     lat_deg: float
     lon_deg: float
     alt_m: float
+    is_set: bool = False
+    locked: bool = False
 
 
 @dataclass

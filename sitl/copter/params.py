@@ -28,6 +28,8 @@ MAV_PARAM_TYPE_INT16 = 4
 MAV_PARAM_TYPE_INT32 = 6
 MAV_PARAM_TYPE_REAL32 = 9
 _INT_TYPES = (1, 2, 3, 4, 5, 6, 7, 8)
+# MAV_PARAM_TYPE -> 2 ** (bits - 1) of the signed integer holding it (unsigned types alike, ArduPilot has none)
+_INT_LIMITS = {1: 128.0, 2: 128.0, 3: 32768.0, 4: 32768.0, 5: 2.0 ** 31, 6: 2.0 ** 31}
 
 # REQUEST_DATA_STREAM stream id -> rate parameter (ArduPilot SRn_*; one link here, n = 0).
 STREAM_PARAMS = {
@@ -156,8 +158,11 @@ class ParamStore:
         """Call ``callback(name, value)`` after every successful change."""
         self._listeners.append(callback)
 
-    def set(self, name: str, value: float, *, force: bool = False) -> tuple[bool, str]:
+    def set(self, name: str, value: float, *, force: bool = False, check_range: bool = True) -> tuple[bool, str]:
         """Set ``name`` to ``value``.
+
+        ``check_range=False`` is ArduPilot's PARAM_SET: a value outside the documented range is set
+        all the same (integer types are clamped to what the type holds).
 
         Returns
         -------
@@ -179,7 +184,10 @@ class ParamStore:
             return False, "read-only"
         if spec.ptype in _INT_TYPES:
             v = float(round(v))
-        if not spec.minimum <= v <= spec.maximum:
+            if not check_range:
+                lim = _INT_LIMITS.get(spec.ptype, 2.0 ** 31)
+                v = min(max(v, -lim), lim - 1)
+        if check_range and not spec.minimum <= v <= spec.maximum:
             return False, f"{v:g} outside [{spec.minimum:g}, {spec.maximum:g}]"
         self._values[i] = v
         for cb in self._listeners:

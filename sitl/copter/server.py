@@ -19,7 +19,9 @@ send every stream message that fell due (a stream at the control rate yields exa
 per step, stamped with the step's end), then the STATUSTEXTs.  A stream message goes to the links
 whose schedule made it due, built once per tick however many links want it; replies go to the
 link that asked; HEARTBEAT and STATUSTEXT go to every link, and every new peer gets a HEARTBEAT
-once the input that revealed it has been handled.
+once the input that revealed it has been handled.  What the dispatcher sends unasked (mission
+re-requests and cancellations to the uploading link; HOME_POSITION, MISSION_CURRENT and
+MISSION_ITEM_REACHED to every link) is drained after each message and each tick.
 """
 
 from __future__ import annotations
@@ -124,7 +126,7 @@ class SitlServer(LoopServer):
         self.links = Links(transports, self.endpoint, self.counters, StreamScheduler, radio, seed)
         self._tcounters = TelemetryCounters()
         # the dispatcher's own scheduler is a fallback; every message comes with its link's
-        self.dispatcher = Dispatcher(self.sim, StreamScheduler(), self.endpoint, self._tcounters)
+        self.dispatcher = Dispatcher(self.sim, StreamScheduler(), self.endpoint, self._tcounters, self.clock.now_ns)
         self.steps = 0
         self.loop = ServerLoop(self, self.links, self.clock, lockstep=lockstep, tick_ns=self.sim.tick_ns,
                                release=self._release, name="sitl server")
@@ -179,6 +181,8 @@ class SitlServer(LoopServer):
     def take_input(self, now_ns: int) -> None:
         """Handle what the links received (stepping in lockstep), then greet the new peers."""
         self.handle_input(self.links.poll(now_ns))
+        self.dispatcher.poll()
+        self._queue_outbox()
         greet = self.links.take_greetings()
         if greet:
             hb = heartbeat(self.sim)
@@ -193,9 +197,10 @@ class SitlServer(LoopServer):
                 continue
             streams = self.links.link(key).streams
             for msg in msgs:
-                replies, step = self.dispatcher.handle(msg, streams)
+                replies, step = self.dispatcher.handle(msg, streams, key)
                 for r in replies:
                     self.links.queue(key, r)
+                self._queue_outbox()
                 self._queue_events()
                 if step and self.lockstep:
                     self.step()
@@ -205,6 +210,8 @@ class SitlServer(LoopServer):
         """One inner-loop tick; queues the stream messages that fell due and the STATUSTEXTs."""
         sim = self.sim
         sim.tick()
+        self.dispatcher.poll_vehicle()
+        self._queue_outbox()
         built: dict[int, mavlink.MAVLink_message | None] = {}
         now = sim.time_ns
         for key, ln in self.links.links.items():
@@ -228,6 +235,17 @@ class SitlServer(LoopServer):
         """Send what is queued; save the signing state when due."""
         self.links.flush(now_ns)
         self.endpoint.persist_signing()
+
+    def _queue_outbox(self) -> None:
+        """Queue the dispatcher's unasked messages (mission re-requests, HOME_POSITION, MISSION_CURRENT, ...)."""
+        out = self.dispatcher.outbox
+        if out:
+            for key, m in out:
+                if key is None:
+                    self.links.queue_all(m)
+                elif key in self.links.links:
+                    self.links.queue(key, m)
+            out.clear()
 
     def _queue_events(self) -> None:
         ev = self.sim.autopilot.events

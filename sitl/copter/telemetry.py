@@ -3,56 +3,73 @@
 What each message carries (all from the sensor readings, not the truth):
 
 * ATTITUDE / ATTITUDE_QUATERNION: IMU attitude and body rates (noisy).
-* LOCAL_POSITION_NED: the position/velocity estimate (noisy), origin = home.
-* GLOBAL_POSITION_INT: the same around ``[home]`` (flat earth), altitudes in mm.
+* LOCAL_POSITION_NED: the position/velocity estimate (noisy), origin = the EKF origin (the boot
+  position, ``[home]`` of the vehicle file).
+* GLOBAL_POSITION_INT: the same around the origin (flat earth, :mod:`quadrotor.geodesy`), altitudes
+  in mm; ``relative_alt`` above home (``sim.home``: set when the estimator is ready, re-set at
+  arming, moved by DO_SET_HOME), as ArduPilot.
 * ALTITUDE: ``altitude_relative``/``altitude_terrain`` = barometric altitude
   above home (10 cm resolution + noise), ``altitude_monotonic``/
   ``altitude_amsl`` = that + home altitude, ``altitude_local`` = -z of the
   estimate, ``bottom_clearance`` = rangefinder if fitted, else the baro altitude.
 * DISTANCE_SENSOR (only with ``sensors.rangefinder``): downward range, cm.
-* SYS_STATUS / BATTERY_STATUS: pack voltage, current, consumed charge and
-  energy, remaining %, link error counters (SYS_STATUS ``drop_rate_comm``,
-  ``errors_comm`` and ``errors_count1..4`` = bad frames, unknown messages,
+* BATTERY_STATUS: pack voltage, current, consumed charge and energy, remaining %.
+* SYS_STATUS (:mod:`sitl.copter.telemetry_status`, with EKF_STATUS_REPORT, POWER_STATUS, MEMINFO,
+  SYSTEM_TIME, VIBRATION, AHRS, RC_CHANNELS): health bits as ArduPilot, battery, link error counters
+  (``drop_rate_comm``, ``errors_comm`` and ``errors_count1..4`` = bad frames, unknown messages,
   rejected signatures, messages for other systems).
+* GPS_RAW_INT, GPS_GLOBAL_ORIGIN, HOME_POSITION, RAW_IMU, SCALED_IMU2, SCALED_PRESSURE,
+  NAV_CONTROLLER_OUTPUT, AHRS2: :mod:`sitl.copter.telemetry_nav`; MISSION_CURRENT: :mod:`sitl.copter.mission`.
 * HEARTBEAT: QUADROTOR / ARDUPILOTMEGA, custom mode, armed flag, MAV_STATE.
-* EXTENDED_SYS_STATE (landed state), VFR_HUD, SYSTEM_TIME (no UTC: 0),
-  SERVO_OUTPUT_RAW (rotor thrust as 1000..2000 us, linear), ATTITUDE_TARGET.
+* EXTENDED_SYS_STATE (landed state), VFR_HUD, SERVO_OUTPUT_RAW (rotor thrust as 1000..2000 us, linear), ATTITUDE_TARGET.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from quadrotor.geodesy import geodetic_from_local
+from sitl.copter.mission import mission_current
 from sitl.copter.simulation import Simulation
+from sitl.copter.telemetry_nav import NAV_BUILDERS
+from sitl.copter.telemetry_status import STATUS_BUILDERS
 
 __all__ = ["BUILDERS", "heartbeat", "build", "autopilot_version", "TelemetryCounters"]
 
 _UINT16_MAX = 65535
 
-# MAV_SYS_STATUS_SENSOR bits reported present/enabled/healthy.
-_SENSORS = (0x1 | 0x2 | 0x8 | 0x20 | 0x400 | 0x800 | 0x1000 | 0x2000 | 0x8000 | 0x200000 | 0x2000000)
-
 # ArduPilot 4.8.0-dev: major << 24 | minor << 16 | patch << 8 | FIRMWARE_VERSION_TYPE_DEV (0)
 FLIGHT_SW_VERSION = (4 << 24) | (8 << 16)
-#: ... and SET_ACTUATOR_CONTROL_TARGET (bit 1024, MAV_PROTOCOL_CAPABILITY_SET_ACTUATOR_TARGET): this SITL takes it.
+#: What this SITL implements: the mission protocol (float and int items, fences, rally points),
+#: float parameters, COMMAND_INT, MAVFTP (``@PARAM/param.pck``), SET_ATTITUDE_TARGET, MAVLink 2, and
+#: SET_ACTUATOR_CONTROL_TARGET (bit 1024, MAV_PROTOCOL_CAPABILITY_SET_ACTUATOR_TARGET).  The
+#: SET_POSITION_TARGET_* bits are added by the dispatcher when the navigation module takes them.
 CAPABILITIES = (
-    mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | 1024
+    mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_FTP | mavlink.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY | 1024
 )
 #: ``flight_custom_version``: the mark by which gcs knows its own simulator (gcs.vehicles.firmware).
 BUILTIN_SITL_MARK = list(b"gcssitl\0")
 
 
 class TelemetryCounters:
-    """Link statistics shown in SYS_STATUS (filled by the endpoint)."""
+    """Link statistics shown in SYS_STATUS (filled by the endpoint), and the wall clock at boot.
 
-    __slots__ = ("frames_in", "errors", "unknown", "bad_signature", "wrong_target")
+    ``boot_unix_us``: SYSTEM_TIME.time_unix_usec at simulated time 0 (default: the wall clock when
+    made; give a fixed value for byte-identical lockstep runs).
+    """
 
-    def __init__(self) -> None:
+    __slots__ = ("frames_in", "errors", "unknown", "bad_signature", "wrong_target", "boot_unix_us")
+
+    def __init__(self, boot_unix_us: int | None = None) -> None:
+        self.boot_unix_us = time.time_ns() // 1000 if boot_unix_us is None else int(boot_unix_us)
         self.frames_in = 0
         self.errors = 0
         self.unknown = 0
@@ -70,16 +87,6 @@ def heartbeat(sim: Simulation) -> mavlink.MAVLink_message:
     base = ap.base_mode  # CUSTOM_MODE | STABILIZE (+ GUIDED) (+ SAFETY_ARMED); an emulation's own
     return mavlink.MAVLink_heartbeat_message(
         mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, base, int(ap.mode), ap.system_status, 3)
-
-
-def _sys_status(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message:
-    b = sim.world.battery
-    total = c.frames_in + c.errors
-    drop = min(10000, int(10000 * c.errors / total)) if total else 0
-    return mavlink.MAVLink_sys_status_message(
-        _SENSORS, _SENSORS, _SENSORS, 100, int(round(b.voltage_v * 1000)), int(round(b.current_a * 100)),
-        int(round(100 * b.charge)), drop, min(c.errors, _UINT16_MAX), min(c.errors, _UINT16_MAX),
-        min(c.unknown, _UINT16_MAX), min(c.bad_signature, _UINT16_MAX), min(c.wrong_target, _UINT16_MAX), 0, 0, 0)
 
 
 def _attitude(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message:
@@ -108,9 +115,11 @@ def _global_position(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_m
     n = sim.nav
     h = sim.vehicle.home
     lat, lon = geodetic_from_local(h.lat_deg, h.lon_deg, n.n, n.e)
+    alt = h.alt_m - n.d
     return mavlink.MAVLink_global_position_int_message(
-        _ms(sim), int(round(lat * 1e7)), int(round(lon * 1e7)), int(round((h.alt_m - n.d) * 1000)),
-        int(round(-n.d * 1000)), int(round(n.vn * 100)), int(round(n.ve * 100)), int(round(n.vd * 100)),
+        _ms(sim), int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
+        int(round((alt - sim.home.alt_m) * 1000)), int(round(n.vn * 100)), int(round(n.ve * 100)),
+        int(round(n.vd * 100)),
         _heading_cdeg(sim))
 
 
@@ -149,10 +158,6 @@ def _battery_status(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_me
         int(round(100 * b.charge)), 0, charge_state, [0, 0, 0, 0], 0, 0)
 
 
-def _system_time(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message:
-    return mavlink.MAVLink_system_time_message(0, _ms(sim))
-
-
 def _vfr_hud(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message:
     n = sim.nav
     gs = math.hypot(n.vn, n.ve)
@@ -180,17 +185,19 @@ def _attitude_target(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_m
                                                    ap.throttle)
 
 
-def autopilot_version(sim: Simulation) -> mavlink.MAVLink_message:
-    """AUTOPILOT_VERSION (answer to MAV_CMD_REQUEST_MESSAGE 148 / REQUEST_AUTOPILOT_CAPABILITIES)."""
-    caps, version, custom = sim.autopilot.identity or (CAPABILITIES, FLIGHT_SW_VERSION, BUILTIN_SITL_MARK)
+def autopilot_version(sim: Simulation, extra_capabilities: int = 0) -> mavlink.MAVLink_message:
+    """AUTOPILOT_VERSION (answer to MAV_CMD_REQUEST_MESSAGE 148 / REQUEST_AUTOPILOT_CAPABILITIES).
+
+    ``extra_capabilities``: bits of what the navigation module takes (SET_POSITION_TARGET_*).
+    """
+    caps, version, custom = sim.autopilot.identity or (CAPABILITIES | extra_capabilities, FLIGHT_SW_VERSION,
+                                                       BUILTIN_SITL_MARK)
     return mavlink.MAVLink_autopilot_version_message(
         caps, version, 0, 0, 0, custom, [0] * 8, [0] * 8, 0, 0, 0, [0] * 18)
 
 
 BUILDERS: dict[int, Callable[[Simulation, TelemetryCounters], mavlink.MAVLink_message | None]] = {
     mavlink.MAVLINK_MSG_ID_HEARTBEAT: lambda sim, c: heartbeat(sim),
-    mavlink.MAVLINK_MSG_ID_SYS_STATUS: _sys_status,
-    mavlink.MAVLINK_MSG_ID_SYSTEM_TIME: _system_time,
     mavlink.MAVLINK_MSG_ID_ATTITUDE: _attitude,
     mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: _attitude_quaternion,
     mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: _local_position,
@@ -202,6 +209,9 @@ BUILDERS: dict[int, Callable[[Simulation, TelemetryCounters], mavlink.MAVLink_me
     mavlink.MAVLINK_MSG_ID_ALTITUDE: _altitude,
     mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: _battery_status,
     mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: _extended_sys_state,
+    mavlink.MAVLINK_MSG_ID_MISSION_CURRENT: lambda sim, c: mission_current(sim),
+    **STATUS_BUILDERS,
+    **NAV_BUILDERS,
 }
 
 

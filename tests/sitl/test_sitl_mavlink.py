@@ -28,7 +28,7 @@ def test_heartbeat_and_requested_stream_rates_in_real_time(make_server, make_gcs
     assert hb.custom_mode == 0 and not hb.base_mode & ARMED
     # nothing but heartbeats until a stream is requested (like ArduCopter)
     gcs.recv(timeout=0.4, cond=lambda m: False)
-    assert set(gcs.log) <= {"HEARTBEAT"}
+    assert set(gcs.log) <= {"HEARTBEAT", "HOME_POSITION"}    # HOME_POSITION: home set (as ArduCopter)
     assert gcs.request(M.MAVLINK_MSG_ID_ATTITUDE, 50).result == M.MAV_RESULT_ACCEPTED
     gcs.conn.mav.request_data_stream_send(1, 1, M.MAV_DATA_STREAM_POSITION, 10, 1)
     assert gcs.recv("LOCAL_POSITION_NED", 2.0) is not None
@@ -182,11 +182,18 @@ def test_parameter_protocol(make_server, make_gcs):
     assert gcs.param_set("GUID_OPTIONS", 8).param_value == 8
     assert gcs.param_get("GUID_OPTIONS").param_value == 8
     assert srv.sim.params["GUID_OPTIONS"] == 8
-    refused = gcs.param_set("GUID_TIMEOUT", 99.0)
-    assert refused.param_value == 3.0
-    assert gcs.recv("STATUSTEXT", cond=lambda m: "Param write denied (GUID_TIMEOUT)" in m.text) is not None
+    # As ArduPilot: a value outside the documented range is set; the echo carries param_index -1 (65535)
+    echo = gcs.param_set("GUID_TIMEOUT", 99.0)
+    assert echo.param_value == 99.0 and echo.param_index == 65535 and srv.sim.params["GUID_TIMEOUT"] == 99.0
+    # an unknown name: PARAM_ERROR only, no STATUSTEXT, no PARAM_VALUE
     gcs.conn.mav.param_set_send(1, 1, b"NO_SUCH_PARAM", 1.0, M.MAV_PARAM_TYPE_REAL32)
-    assert gcs.recv("STATUSTEXT", cond=lambda m: "NO_SUCH_PARAM" in m.text) is not None
+    err = gcs.recv("PARAM_ERROR")
+    assert err.param_id == "NO_SUCH_PARAM" and err.error == M.MAV_PARAM_ERROR_DOES_NOT_EXIST
+    # a read-only one: denied, said, and the unchanged value echoed
+    ro = gcs.param_set("FRAME_CLASS", 2)
+    assert ro.param_value == 1 and srv.sim.params["FRAME_CLASS"] == 1
+    assert gcs.recv("STATUSTEXT", cond=lambda m: "Param write denied (FRAME_CLASS)" in m.text) is not None
+    assert not any("NO_SUCH_PARAM" in t for t in gcs.texts)
 
 
 def test_commands_modes_timesync_and_messages(make_server, make_gcs):
