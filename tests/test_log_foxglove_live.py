@@ -33,10 +33,20 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-async def _first_message(port: int, topic: str, timeout_s: float) -> tuple[dict, int, bytes]:
+async def _first_message(port: int, topic: str, timeout_s: float, alive=lambda: True) -> tuple[dict, int, bytes]:
     """Connect (retrying while the server starts), wait for ``topic`` to be advertised, subscribe, and return
-    ``(its channel, log time, payload)`` of the first message."""
+    ``(its channel, log time, payload)`` of the first message. A connection the server closes first (a
+    viewer it dropped) is made again while ``alive()`` and time is left, as Foxglove reconnects."""
     deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            return await _first_message_once(port, topic, deadline)
+        except websockets.exceptions.ConnectionClosed:
+            if not alive() or time.monotonic() > deadline:
+                raise
+
+
+async def _first_message_once(port: int, topic: str, deadline: float) -> tuple[dict, int, bytes]:
     while True:
         try:
             ws = await websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=SUBPROTOCOLS, open_timeout=5)
@@ -114,7 +124,13 @@ def test_gcs_fly_live_serves_the_vehicle_pose(tmp_path):
                              "--duration", "30", "--log", str(log), "--live", f"127.0.0.1:{port}"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        channel, t, payload = asyncio.run(_first_message(port, T.FOXGLOVE_VEHICLE_POSE, 120))
+        try:
+            channel, t, payload = asyncio.run(_first_message(port, T.FOXGLOVE_VEHICLE_POSE, 120,
+                                                             alive=lambda: proc.poll() is None))
+        except (websockets.exceptions.WebSocketException, OSError, TimeoutError) as exc:
+            proc.kill()
+            out, err = proc.communicate(timeout=60)
+            raise AssertionError(f"no live message ({exc!r}); gcs exit {proc.returncode}, stderr:\n{err}") from exc
         out, err = proc.communicate(timeout=300)
     finally:
         if proc.poll() is None:

@@ -150,7 +150,8 @@ class RecordEncoder:
         if n == 0:
             return
         err = b.reference - b.estimate
-        err[:, 8] = (err[:, 8] + math.pi) % (2 * math.pi) - math.pi
+        with np.errstate(invalid="ignore"):  # a non-finite estimate stays non-finite (its tick is skipped)
+            err[:, 8] = (err[:, 8] + math.pi) % (2 * math.pi) - math.pi
         costs = self._block_costs(b)
         new_ref = self._new_references(b.reference)
         truth, ref, est, errs = b.truth.tolist(), b.reference.tolist(), b.estimate.tolist(), err.tolist()
