@@ -12,7 +12,7 @@ import threading
 import time
 from typing import Protocol
 
-__all__ = ["Clock", "MonotonicClock", "ManualClock"]
+__all__ = ["Clock", "MonotonicClock", "ManualClock", "ScaledClock"]
 
 
 class Clock(Protocol):
@@ -41,6 +41,30 @@ class MonotonicClock:
                 return
             if remaining > self.spin_ns:
                 time.sleep((remaining - self.spin_ns) / 1e9)
+
+
+class ScaledClock(MonotonicClock):
+    """Real time run ``speedup`` times faster (``sitl --speedup``, as ArduPilot SITL's): from its
+    creation, ``speedup`` ns of this clock pass per wall-clock ns.
+
+    Raises
+    ------
+    ValueError
+        ``speedup`` not finite or not in (0, 100].
+    """
+
+    def __init__(self, speedup: float, spin_ns: int = 300_000) -> None:
+        if not 0.0 < float(speedup) <= 100.0:  # also rejects NaN
+            raise ValueError(f"speedup must be in (0, 100], got {speedup!r}")
+        super().__init__(spin_ns)
+        self.speedup = float(speedup)
+        self._wall0 = time.monotonic_ns()
+
+    def now_ns(self) -> int:
+        return self._wall0 + int((time.monotonic_ns() - self._wall0) * self.speedup)
+
+    def sleep_until_ns(self, deadline_ns: int) -> None:
+        super().sleep_until_ns(self._wall0 + int((deadline_ns - self._wall0) / self.speedup))
 
 
 class ManualClock:

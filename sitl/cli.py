@@ -21,7 +21,7 @@ import time
 from collections.abc import Sequence
 from typing import NoReturn
 
-from quadrotor.clock import MonotonicClock
+from quadrotor.clock import MonotonicClock, ScaledClock
 from quadrotor.errors import QuadrotorError
 from quadrotor.mavlink.signing import default_state_path
 from sitl import options
@@ -131,6 +131,8 @@ def _simulation_options(sim: argparse._ArgumentGroup) -> None:
                      help="plant: 6-DOF rigid body or the paper's reduced model (default: the vehicle file's)")
     sim.add_argument("--lockstep", action="store_true",
                      help="advance simulated time one period per received target instead of in real time")
+    sim.add_argument("--speedup", metavar="X", type=float, default=1.0,
+                     help="real time X times faster (0 < X <= 100; not with --lockstep; default: 1)")
     sim.add_argument("--period", metavar="S", type=float, default=0.01,
                      help="lockstep step, a multiple of 0.0025 s (default: 0.01)")
     sim.add_argument("--seed", metavar="S", type=int, default=0,
@@ -284,7 +286,7 @@ def _run(args: argparse.Namespace) -> int:
         sysid = int(params.get("SYSID_THISMAV", 1))
         state = args.signing_state if args.signing_state is not None else default_state_path(key, sysid)
     radio = RadioParams(baud=baud, loss=args.loss, latency_s=args.latency)
-    clock = MonotonicClock()
+    clock = _clock(args)
     transports = options.open_endpoints(args.endpoints, clock.now_ns)
     server = SitlServer(transports, vehicle=vehicle, lockstep=args.lockstep, control_period_s=args.period,
                         seed=args.seed, wind=wind, initial=initial, params=params, signing_key=key,
@@ -292,6 +294,18 @@ def _run(args: argparse.Namespace) -> int:
                         emulate=args.emulate, ekf_ready_s=args.ekf_ready_s)
     what = f"{vehicle.name} ({vehicle.model}{', emulating ' + args.emulate if args.emulate else ''})"
     return _serve(server, what, args)
+
+
+def _clock(args: argparse.Namespace) -> MonotonicClock:
+    """Real time, or ``--speedup`` times faster."""
+    if args.speedup == 1.0:
+        return MonotonicClock()
+    if args.lockstep:
+        raise UsageError("--speedup: not with --lockstep (lockstep runs as fast as the ground station)")
+    try:
+        return ScaledClock(args.speedup)
+    except ValueError as exc:
+        raise UsageError(f"--speedup: {exc}") from None
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -5,8 +5,9 @@ values; the MAVLink side is :mod:`sitl.copter.dispatch` and :mod:`sitl.copter.te
 Messages for the ground station (STATUSTEXT) are queued in :attr:`Autopilot.events`.
 
 Failsafes
-    No new accepted target for ``GUID_TIMEOUT`` while armed in a guided mode: level, switch to
-    LAND, STATUSTEXT.  (ArduCopter itself only levels and holds altitude on this timeout.)
+    No new accepted attitude target for ``GUID_TIMEOUT`` while armed in a guided mode: level, switch
+    to LAND, STATUSTEXT.  (ArduCopter itself only levels and holds altitude on this timeout.)  GUIDED
+    without attitude targets holds position (:mod:`sitl.copter.navigation`), as ArduCopter.
     Battery below ``BATT_LOW_VOLT`` (resting voltage) or ``BATT_LOW_MAH`` for 10 s: STATUSTEXT
     and, with ``BATT_FS_LOW_ACT >= 1``, LAND.
 Landing and disarming
@@ -30,7 +31,8 @@ from sitl.copter.battery import BatteryState
 from sitl.copter.control import (ClimbRateController, RateController, angle_boost, attitude_rate_demand, land_attitude,
                                  land_speed)
 from sitl.copter.mixer import Mixer, MixResult
-from sitl.copter.modes import GUIDED_MODES, Mode
+from sitl.copter.modes import GUIDED_ENABLED_MODES, GUIDED_MODES, Mode
+from sitl.copter.navigation import NAV_MODES, Navigator
 from sitl.copter.params import ParamStore
 from sitl.copter.sensors import ImuReading, NavReading
 from sitl.copter.targets import Target, actuator_target, attitude_target
@@ -73,6 +75,8 @@ class Autopilot:
         self.armed = False
         self.land_complete = True
         self.target: Target | None = None
+        #: The navigation modes (attached by the simulation, which has the mission and home); None: none.
+        self.navigator: Navigator | None = None
         self.failsafe = ""
         self.events: list[tuple[int, str]] = []
         self.targets_accepted = 0
@@ -134,7 +138,8 @@ class Autopilot:
     @property
     def base_mode(self) -> int:
         """HEARTBEAT base_mode: CUSTOM_MODE_ENABLED | STABILIZE_ENABLED, + GUIDED_ENABLED, + SAFETY_ARMED."""
-        return 1 | 16 | (8 if self.mode in GUIDED_MODES else 0) | (128 if self.armed else 0)
+        guided = self.mode in GUIDED_ENABLED_MODES or self.mode == Mode.GUIDED_NOGPS
+        return 1 | 16 | (8 if guided else 0) | (128 if self.armed else 0)
 
     def position_ready(self, now_ns: int) -> bool:
         """Whether LOCAL_POSITION_NED is sent (always here; an emulated EKF waits)."""
@@ -162,6 +167,12 @@ class Autopilot:
             return False, reason
         if new == self.mode:
             return True, ""
+        nav_ctl = self.navigator
+        why = (nav_ctl.refusal(new, self.land_complete) if nav_ctl is not None else
+               f"Mode change to {new.name} failed: unsupported" if new in NAV_MODES else "")
+        if why:
+            self._say(SEVERITY_WARNING, why)
+            return False, why
         self._enter(new, now_ns)
         self.failsafe = ""
         return True, ""
@@ -174,6 +185,17 @@ class Autopilot:
         self._yaw_hold = imu.yaw if imu is not None else self._yaw_hold
         nav = self._last_nav
         self.climb_ctl.reset(-nav.vd if nav is not None and not self.land_complete else 0.0)
+        self._nav_enter(now_ns)
+
+    def _nav_enter(self, now_ns: int) -> None:
+        imu, nav = self._last_imu, self._last_nav
+        if self.navigator is not None and imu is not None and nav is not None:
+            self.navigator.enter(self.mode, nav, imu.yaw, self.land_complete, now_ns)
+
+    def _nav_flies(self) -> bool:
+        """Whether the navigator flies now: its modes, and GUIDED without an attitude target."""
+        return self.navigator is not None and (self.mode in NAV_MODES or
+                                               (self.mode == Mode.GUIDED and self.target is None))
 
     def arm(self, now_ns: int, force: bool = False) -> tuple[bool, str]:
         """Arm (checks: :func:`~sitl.copter.arming.arming_failure`); returns ``(ok, reason)``."""
@@ -195,6 +217,7 @@ class Autopilot:
         imu = self._last_imu
         self._yaw_hold = imu.yaw if imu is not None else 0.0
         self._reset_loops()
+        self._nav_enter(now_ns)
         self._say(SEVERITY_INFO, "Arming motors")
         return True, ""
 
@@ -274,7 +297,7 @@ class Autopilot:
         return cmd
 
     def _check_failsafes(self, now_ns: int, battery: BatteryState) -> None:
-        if now_ns - self._timer_ns > self._timeout_ns and self.mode in GUIDED_MODES:
+        if now_ns - self._timer_ns > self._timeout_ns and self.mode in GUIDED_MODES and not self._nav_flies():
             self._guided_timeout(now_ns)
         low, rest = battery_low(battery, self.params, self._r_int)
         if not low:
@@ -332,6 +355,8 @@ class Autopilot:
 
     def _run_mode(self, now_ns: int, dt: float, imu: ImuReading, nav: NavReading) -> tuple[float, float, float, float]:
         mode = self.mode
+        if self._nav_flies():
+            return self._run_nav(now_ns, dt, imu, nav)
         if mode in GUIDED_MODES:
             t = self.target
             if t is None:  # mode entry / after arming: level, hold altitude (ArduCopter angle_control_start)
@@ -363,9 +388,25 @@ class Autopilot:
             return self._ground_idle()
         return self._fly(self._level_q(), (0.0, 0.0, 0.0), False, 0.0, False, dt, imu)
 
+    def _run_nav(self, now_ns: int, dt: float, imu: ImuReading, nav: NavReading) -> tuple[float, float, float, float]:
+        d = self.navigator.update(now_ns, dt, nav, imu.yaw)  # type: ignore[union-attr]
+        if self.land_complete:
+            if d.land and self.mode != Mode.GUIDED:
+                self.disarm(now_ns, force=True, why="landed")
+                return (0.0, 0.0, 0.0, 0.0)
+            if d.land or not self.navigator.wants_takeoff(nav):  # type: ignore[union-attr]
+                return self._ground_idle()
+            self.land_complete = False
+            self._landed_since_ns = None
+            self._reset_loops()
+        return self._fly(d.q, (0.0, 0.0, 0.0), False, self._climb_throttle(d.climb_m_s, dt, nav), True, dt, imu)
+
     def _descent_demanded(self) -> bool:
         if self.throttle >= 0.85 * self._hover:
             return False
+        if self._nav_flies():
+            last = self.navigator.last  # type: ignore[union-attr]
+            return last is None or last.land or last.climb_m_s <= 0.0
         if self.mode == Mode.LAND:
             return True
         t = self.target
@@ -384,7 +425,10 @@ class Autopilot:
                 self._landed_since_ns = now_ns
                 self._land_cond_since_ns = None
                 self._reset_loops()
-                if self.mode == Mode.LAND:
+                last = self.navigator.last if self._nav_flies() else None  # type: ignore[union-attr]
+                if self.mode == Mode.LAND or (last is not None and last.land):
+                    if last is not None:
+                        self.navigator.touchdown()  # type: ignore[union-attr]
                     self.disarm(now_ns, force=True, why="landed")
         else:
             self._land_cond_since_ns = None

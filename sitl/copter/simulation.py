@@ -28,6 +28,7 @@ from sitl.copter.ardupilot_emulation.status import EKF_READY_S
 from sitl.copter.ardupilot_emulation.vehicle import emulation_params
 from sitl.copter.autopilot import Autopilot
 from sitl.copter.mission_store import Home, MissionStore
+from sitl.copter.navigation import Navigator
 from sitl.copter.params import ParamStore, ardupilot_params
 from sitl.copter.rigid_body import RigidBodyState, initial_state
 from sitl.copter.sensors import NavReading, NedSensors
@@ -117,6 +118,8 @@ class Simulation:
         self.missions = MissionStore()
         h = vehicle.home
         self.home = Home(h.lat_deg, h.lon_deg, h.alt_m)
+        self.autopilot.navigator = Navigator(self.params, vehicle.gravity_m_s2, self.missions,
+                                             (h.lat_deg, h.lon_deg, h.alt_m), self.home, self.autopilot._say)
         self.time_ns = 0
         k = self.world.kinematics
         self.imu = self.sensors.imu(k)

@@ -199,7 +199,7 @@ def test_parameter_protocol(make_server, make_gcs):
 def test_commands_modes_timesync_and_messages(make_server, make_gcs):
     srv = make_server()
     gcs = make_gcs(srv)
-    assert gcs.command(M.MAV_CMD_DO_SET_MODE, 1, 2).result == M.MAV_RESULT_FAILED        # ALT_HOLD: not emulated
+    assert gcs.command(M.MAV_CMD_DO_SET_MODE, 1, 7).result == M.MAV_RESULT_FAILED        # CIRCLE: not emulated
     assert gcs.command(12345).result == M.MAV_RESULT_UNSUPPORTED
     gcs.conn.mav.set_mode_send(1, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4)
     ack = gcs.recv("COMMAND_ACK", cond=lambda m: m.command == M.MAVLINK_MSG_ID_SET_MODE)
