@@ -34,6 +34,7 @@ from gcs.log.meta import default_log_path, run_attachments, run_metadata
 from gcs.log.recorder import BYTES_PER_FLIGHT_TICK, FlightRecorder, utc_offset_ns
 from gcs.flight.result import FlightResult
 from gcs.flight.safety import envelope_for
+from gcs.link.forward import Forwarder
 from gcs.link.budget import compute_budget, control_streams, format_budget, suggest_fixes
 from gcs.link.mavlink import LinkError, MavlinkLink
 from gcs.link.rig import RigLink, rig_link_budget
@@ -44,7 +45,7 @@ from gcs.vehicles.arducopter_sitl import ArduCopterSitl
 from gcs.vehicles.embedded import EmbeddedRig, EmbeddedSitl
 from gcs.vehicles.px4_events import EventMetadata, find_event_metadata
 from gcs.vehicles.px4_sitl import Px4Sitl
-from gcs.vehicles.mavlink import MavlinkSession
+from gcs.vehicles.mavlink import STREAM_IDS, MavlinkSession
 from gcs.vehicles.rig import RigSession
 from quadrotor.clock import MonotonicClock
 
@@ -144,6 +145,7 @@ def _open_vehicle(spec: FlightSpec, config: Config, console: Callable[[str], Non
     should anything after its start fail)."""
     child = None
     events = None
+    forwarder = _open_forwarder(spec)
     try:
         if spec.vehicle == "rig":
             baud = spec.baud or 115200
@@ -192,11 +194,44 @@ def _open_vehicle(spec: FlightSpec, config: Config, console: Callable[[str], Non
                                  ready_timeout_s=spec.ready_timeout_s,
                                  boot_speedup=child.speedup if spec.firmware == "arducopter" else None,
                                  event_metadata=events)
+        if forwarder is not None:
+            forwarder.own_ids = (link.source_system, link.source_component)
+            forwarder.on_streams = lambda: _reassert_streams(session)
+            link.forwarder = forwarder
         return session, link, child
     except BaseException:
+        if forwarder is not None:
+            forwarder.close(quiet=True)
         if child is not None:
             child.stop()
         raise
+
+
+def _open_forwarder(spec: FlightSpec) -> Forwarder | None:
+    """``--out``'s endpoints, opened before the vehicle (a port in use: a link error, nothing started)."""
+    if not spec.out:
+        return None
+    try:
+        return Forwarder(spec.out)
+    except OSError as exc:
+        raise LinkError(str(exc)) from None
+
+
+def _reassert_streams(session: MavlinkSession) -> None:
+    """A client's stream request went to the vehicle: ask for the rates the controller flies on again, at once."""
+    link = session.link
+    for name, rate in session.streams.requested_hz.items():
+        session.io.quietly(lambda name=name, rate=rate: link.send_message_interval(STREAM_IDS[name], rate))
+
+
+def _close_forwarder(link, flight: Flight | None) -> dict | None:
+    """Close ``--out``'s endpoints (their summary said as an event); the summary (None: no --out)."""
+    forwarder = getattr(link, "forwarder", None)
+    if forwarder is None:
+        return None
+    if flight is not None and not forwarder.closed:
+        forwarder.attach(flight.event)
+    return forwarder.close()
 
 
 def _px4_events(path, console: Callable[[str], None]) -> EventMetadata | None:
@@ -230,7 +265,9 @@ def _fly_logged(spec: FlightSpec, config: Config, recorder: FlightRecorder, cons
         with interrupts:
             flight = Flight(config, spec.controller, session, clock=clock, recorder=recorder, console=console,
                             interrupts=interrupts)
-            return _fly_flight(flight, config, spec, child)
+            if getattr(link, "forwarder", None) is not None:
+                link.forwarder.attach(flight.event)
+            return _fly_flight(flight, config, spec, child, link)
     except Exception as exc:  # noqa: BLE001 - outside the mission loop's own net: land, restore, report
         why = f"{type(exc).__name__}: {exc}"
         if flight is None:
@@ -238,12 +275,13 @@ def _fly_logged(spec: FlightSpec, config: Config, recorder: FlightRecorder, cons
         _last_resort(flight, why)
         return FlightResult.refused(spec.controller, config.source, "internal_error", why, flight.events)
     finally:
+        _close_forwarder(link, flight)
         link.close()
         if child is not None:
             child.stop()
 
 
-def _fly_flight(flight: Flight, config: Config, spec: FlightSpec, child) -> FlightResult:
+def _fly_flight(flight: Flight, config: Config, spec: FlightSpec, child, link) -> FlightResult:
     """Preflight, mission, landing, parameters restored; a refusal disarms again on the ground."""
     failure: tuple[str, str] | None = None
     result = None
@@ -261,8 +299,11 @@ def _fly_flight(flight: Flight, config: Config, spec: FlightSpec, child) -> Flig
     else:
         result = flight.fly()
     flight.restore()
+    forwarded = _close_forwarder(link, flight)
     if failure is not None:
-        return FlightResult.refused(spec.controller, config.source, failure[0], failure[1], flight.events)
+        result = FlightResult.refused(spec.controller, config.source, failure[0], failure[1], flight.events)
+    if forwarded is not None:
+        result.link["forward"] = forwarded
     return result  # type: ignore[return-value]
 
 

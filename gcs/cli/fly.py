@@ -14,6 +14,7 @@ from gcs.cli.args import Parser, float_range, int_range, positive_float
 from gcs.control import CONTROLLERS
 from gcs.flight.context import Interrupts
 from gcs.flight.result import EXIT_CODES, FlightResult
+from gcs.link.endpoints import BadOutUrl, parse_out_url
 from gcs.link.keys import read_signing_key
 from gcs.log.foxglove_live import live_argument
 from gcs.report import format_table
@@ -90,6 +91,10 @@ def add_fly_parser(sub) -> None:
     f.add_argument("--live", type=live_argument, metavar="HOST:PORT", default=None,
                    help="[HOST:]PORT: also serve the log's channels live on the Foxglove WebSocket protocol (HOST "
                         "default 127.0.0.1; open ws://HOST:PORT in Foxglove)")
+    f.add_argument("--out", type=out_argument, action="append", default=[], metavar="URL",
+                   help="another ground station, repeatable (as MAVProxy's --out): udpout:HOST:PORT, udpin:HOST:PORT, "
+                        "tcpin:HOST:PORT or tcp:HOST:PORT; it gets the vehicle's traffic and its own goes to the "
+                        "vehicle, except setpoints (dropped while gcs flies)")
     f.add_argument("--quiet", "-q", action="store_true", help="only warnings, failsafes and the final table")
 
 
@@ -120,8 +125,17 @@ def spec_from_args(args: argparse.Namespace, command_line: str = "") -> FlightSp
         target_component=args.target_component,
         signing_key=read_signing_key(args.signing_key) if args.signing_key else None, output=args.output,
         telemetry_rate_hz=args.telemetry_rate, stale_timeout_s=args.stale_timeout, duration_s=args.duration,
-        force_budget=args.force_budget, log=not args.no_log, log_path=args.log, live=args.live,
+        force_budget=args.force_budget, log=not args.no_log, log_path=args.log, live=args.live, out=tuple(args.out),
         metadata={"command_line": command_line} if command_line else {})
+
+
+def out_argument(text: str) -> str:
+    """The ``argparse`` type of ``--out``: the URL checked (a usage error otherwise), as given."""
+    try:
+        parse_out_url(text)
+    except BadOutUrl as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: {exc.reason}") from None
+    return text
 
 
 def check_output_paths(args: argparse.Namespace) -> None:

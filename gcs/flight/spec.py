@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from gcs.config import Config, load_config
+from gcs.link.endpoints import BadOutUrl, parse_out_url
 from quadrotor.errors import ConfigError
 
 __all__ = ["FlightSpec", "VEHICLES", "FIRMWARE_SITLS", "DEFAULT_CONFIG", "DEFAULT_RIG_CONFIG"]
@@ -66,6 +67,9 @@ class FlightSpec:
     live : str or None
         ``[HOST:]PORT``: the log's channels served live there too, on the Foxglove WebSocket protocol
         (:mod:`gcs.log.foxglove_live`; needs the log).
+    out : tuple of str
+        Other ground stations (``udpout:HOST:PORT``, ``udpin:``, ``tcpin:``, ``tcp:``): the vehicle's traffic
+        forwarded to them and theirs to the vehicle, their setpoints dropped (:mod:`gcs.link.forward`).
     metadata : dict
         Added to the log's ``flight`` metadata (e.g. the command line).
     """
@@ -94,6 +98,7 @@ class FlightSpec:
     log: bool = True
     log_path: str | Path | None = None
     live: str | None = None
+    out: tuple[str, ...] = ()
     metadata: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -117,6 +122,15 @@ class FlightSpec:
             raise ConfigError("--port/--connect", "", "give one of them, not both")
         if self.live is not None and not self.log:
             raise ConfigError("--live", self.live, "serves the flight log's channels: not with --no-log")
+        for url in self.out:
+            try:
+                parse_out_url(url)
+            except BadOutUrl as exc:
+                raise ConfigError("--out", url, exc.reason) from None
+        if len(set(self.out)) != len(self.out):
+            raise ConfigError("--out", "", "the same URL given twice")
+        if self.vehicle == "rig" and self.out:
+            raise ConfigError("--out", self.out[0], "forwards MAVLink: not with the rig")
         if self.vehicle == "rig" and (self.connect is not None or self.signing_key is not None or self.output):
             raise ConfigError("--connect/--signing-key/--output", "", "not used with the rig (it takes CONTROL frames "
                                                                       "on a serial port: --port)")
@@ -139,12 +153,14 @@ class FlightSpec:
         doc["log_path"] = None if self.log_path is None else str(self.log_path)
         doc["signing_key"] = None if self.signing_key is None else self.signing_key.hex()
         doc["sitl_args"] = list(self.sitl_args)
+        doc["out"] = list(self.out)
         return doc
 
     @classmethod
     def from_json(cls, doc: dict) -> FlightSpec:
         d = dict(doc)
         d["sitl_args"] = tuple(d.get("sitl_args", ()))
+        d["out"] = tuple(d.get("out", ()))
         if d.get("signing_key") is not None:
             d["signing_key"] = bytes.fromhex(d["signing_key"])
         return cls(**d)
@@ -179,6 +195,8 @@ class FlightSpec:
             out += ["--summary", summary]
         out += ["--log", str(self.log_path)] if self.log and self.log_path else ([] if self.log else ["--no-log"])
         out += ["--live", self.live] if self.live else []
+        for url in self.out:
+            out += ["--out", url]
         return out
 
     def resolved_config(self) -> Config:

@@ -6,7 +6,7 @@ import time
 from typing import Any
 from collections.abc import Callable
 
-__all__ = ["MessageWaiter"]
+__all__ = ["MessageWaiter", "serial_errors"]
 
 
 class MessageWaiter:
@@ -40,3 +40,12 @@ class MessageWaiter:
             if remaining <= 0:
                 return None
             self.wait_readable(min(0.02, remaining))
+
+
+def serial_errors() -> type[Exception]:
+    """pyserial's exception class (an OSError subclass on recent versions)."""
+    try:
+        from serial import SerialException
+    except ImportError:  # pragma: no cover - pyserial is a dependency
+        return OSError
+    return SerialException

@@ -35,8 +35,9 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs.errors import GcsError
 from gcs.link.guard import OutputGuard, UnsafeCommand
-from gcs.link.base import MessageWaiter
+from gcs.link.base import MessageWaiter, serial_errors
 from gcs.link.param_encoding import ParamEncodingError, decode_param, encode_param, same_float32
+from gcs.link.param_encoding import param_id as _param_id
 from quadrotor.mavlink.framing import parse_bytes, reset_parser, restore_unknown_header
 from quadrotor.mavlink.signing import SignatureCheck, setup_signing
 
@@ -132,6 +133,8 @@ class MavlinkLink(MessageWaiter):
         #: name -> MAV_PARAM_TYPE, as the vehicle last reported it.
         self.param_types: dict[str, int] = {}
         self._udp = isinstance(self.conn, mavutil.mavudp)
+        #: Other ground stations (:class:`gcs.link.forward.Forwarder`, ``gcs fly --out``); None = none.
+        self.forwarder = None
 
     # ------------------------------------------------------------------ receive
     def _allow_unsigned(self, mav, msg_id: int) -> bool:
@@ -166,6 +169,8 @@ class MavlinkLink(MessageWaiter):
                 self.conn.clients.clear()
                 self.conn.clients.add(addr)
                 self.conn.clients_last_alive[addr] = time.time()
+        if self.forwarder is not None:
+            self.forwarder.from_vehicle(msg)
         c.received += 1
         c.by_type[t] = c.by_type.get(t, 0) + 1
         if t == "HEARTBEAT" and msg.get_srcComponent() == self.target_component:
@@ -203,6 +208,8 @@ class MavlinkLink(MessageWaiter):
     def drain(self) -> list:
         """Every message waiting now from the target system (never blocks)."""
         out, self._pending = self._pending, []
+        if self.forwarder is not None:
+            self.forwarder.poll(self.conn.write)  # the other ground stations' frames to the vehicle
         if self._udp:
             return self._drain_udp(out)
         recv = self.conn.recv_msg
@@ -309,6 +316,9 @@ class MavlinkLink(MessageWaiter):
             return False
         ts = getattr(msg, "target_system", 0)
         tc = getattr(msg, "target_component", 0)
+        if (ts, tc) != (self.source_system, self.source_component) and self.forwarder is not None \
+                and self.forwarder.client_sent_recently(command):
+            return False  # not addressed to us exactly, and a ground station behind --out sent that command
         return ts in (0, self.source_system) and tc in (0, self.source_component)
 
     def send_message_interval(self, message_id: int, rate_hz: float) -> None:
@@ -384,19 +394,3 @@ class MavlinkLink(MessageWaiter):
 def _interval_us(rate_hz: float) -> int:
     """SET_MESSAGE_INTERVAL's interval [us] for a rate [Hz] (<= 0: stop the stream)."""
     return -1 if not rate_hz > 0 else max(1, int(round(1e6 / rate_hz)))
-
-
-def serial_errors() -> type[Exception]:
-    """pyserial's exception class (an OSError subclass on recent versions)."""
-    try:
-        from serial import SerialException
-    except ImportError:  # pragma: no cover - pyserial is a dependency
-        return OSError
-    return SerialException
-
-
-def _param_id(msg) -> str:
-    pid = msg.param_id
-    if isinstance(pid, bytes):
-        pid = pid.decode(errors="replace")
-    return pid.rstrip("\x00")

@@ -13,7 +13,7 @@ import struct
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-__all__ = ["decode_param", "encode_param", "same_float32", "ParamEncodingError"]
+__all__ = ["decode_param", "encode_param", "same_float32", "ParamEncodingError", "param_id"]
 
 
 class ParamEncodingError(ValueError):
@@ -62,3 +62,11 @@ def same_float32(a: float, b: float) -> bool:
         return pack.pack(a) == pack.pack(b)
     except (OverflowError, struct.error):
         return False
+
+
+def param_id(msg) -> str:
+    """A PARAM_VALUE's or PARAM_SET's parameter name as text."""
+    pid = msg.param_id
+    if isinstance(pid, bytes):
+        pid = pid.decode(errors="replace")
+    return pid.rstrip("\x00")
