@@ -197,6 +197,7 @@ def _open_vehicle(spec: FlightSpec, config: Config, console: Callable[[str], Non
         if forwarder is not None:
             forwarder.own_ids = (link.source_system, link.source_component)
             forwarder.on_streams = lambda: _reassert_streams(session)
+            forwarder.protected = lambda: session.params.changed if session.params is not None else ()
             link.forwarder = forwarder
         return session, link, child
     except BaseException:

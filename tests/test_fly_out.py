@@ -169,6 +169,29 @@ def test_vehicle_frames_reach_a_udpout_client_byte_identical_and_its_frames_reac
     assert "setpoints dropped" in rec.events[-1][1]
 
 
+def test_a_clients_param_set_of_a_flight_parameter_is_dropped_others_forwarded():
+    client = udp_client()
+    rec = Recorder()
+    fwd = Forwarder([f"udpout:127.0.0.1:{client.getsockname()[1]}"], on_event=lambda k, t: rec.events.append((k, t)))
+    fwd.protected = lambda: {"GUID_OPTIONS": 0.0, "GUID_TIMEOUT": 3.0}  # what gcs set for the flight
+    try:
+        fwd.from_vehicle(vehicle_msgs()[0])
+        _, addr = client.recvfrom(65535)
+        c = encoder(255, 0)
+        ours = frame(c, c.param_set_encode(1, 1, b"GUID_OPTIONS", 0, mavlink.MAV_PARAM_TYPE_INT32))
+        theirs = frame(c, c.param_set_encode(1, 1, b"SR0_EXTRA1", 4, mavlink.MAV_PARAM_TYPE_INT16))
+        for data in (ours, theirs):
+            client.sendto(data, addr)
+        poll_until(fwd, rec, lambda: len(rec.written) >= 1)
+        assert rec.written == [theirs] and fwd.counters.dropped == {"PARAM_SET": 1}
+        texts = rec.texts()
+        assert "dropped PARAM_SET GUID_OPTIONS = 0 from 255/0" in texts and "restores it after" in texts
+        assert "sent PARAM_SET SR0_EXTRA1 = 4: forwarded" in texts
+    finally:
+        fwd.close()
+        client.close()
+
+
 def test_udpin_answers_every_address_heard_and_warns_of_our_own_ids():
     rec = Recorder()
     fwd = Forwarder(["udpin:127.0.0.1:0"], on_event=lambda k, t: rec.events.append((k, t)))

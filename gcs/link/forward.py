@@ -27,7 +27,7 @@ import functools
 import re
 import time
 from dataclasses import dataclass, field
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Collection, Iterable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -81,6 +81,9 @@ class Forwarder:
         Events said before it is set are kept and said when it is (:meth:`attach`).
     on_streams : callable () or None
         A client's stream request was forwarded: the flight asks for its own rates again.
+    protected : callable () -> collection of str, or None
+        The parameters gcs set for the flight (and restores after it): a client's PARAM_SET of one is
+        dropped (it would change the flight under the controller, and be overwritten at the restore).
     """
 
     def __init__(self, urls: Iterable[str], *, own_ids: tuple[int, int] = (255, 190),
@@ -89,6 +92,7 @@ class Forwarder:
         parsed = [parse_out_url(u) for u in urls]
         self.own_ids = own_ids
         self.on_streams = on_streams
+        self.protected: Callable[[], Collection[str]] | None = None
         self.clock = clock
         self.counters = ForwardCounters()
         self.endpoints: list[Endpoint] = []
@@ -182,6 +186,12 @@ class Forwarder:
                 self.say("warning", f"--out {who} uses gcs's own ids {src[0]}/{src[1]}: the vehicle's answers to "
                                      "it cannot be told from those to gcs (give it another source system or "
                                      "component)", ("own_ids", name))
+            if t == "PARAM_SET" and self.protected is not None and param_id(msg) in self.protected():
+                pid = param_id(msg)
+                c.dropped[t] = c.dropped.get(t, 0) + 1
+                self.say("forward", f"dropped PARAM_SET {pid} = {msg.param_value:g} from {src[0]}/{src[1]} on --out "
+                                     f"{name}: gcs set {pid} for this flight and restores it after", ("param", pid))
+                continue
             if t in SETPOINTS:
                 c.dropped[t] = c.dropped.get(t, 0) + 1
                 self.say("forward", f"dropped {t} from {src[0]}/{src[1]} on --out {name} (gcs flies the vehicle; "

@@ -32,7 +32,8 @@ from sitl.copter.control import (ClimbRateController, RateController, angle_boos
                                  land_speed)
 from sitl.copter.mixer import Mixer, MixResult
 from sitl.copter.modes import GUIDED_ENABLED_MODES, GUIDED_MODES, Mode
-from sitl.copter.navigation import NAV_MODES, Navigator
+from sitl.copter.autopilot_nav import NavigationMixin
+from sitl.copter.navigation import Navigator
 from sitl.copter.params import ParamStore
 from sitl.copter.sensors import ImuReading, NavReading
 from sitl.copter.targets import Target, actuator_target, attitude_target
@@ -49,7 +50,7 @@ _LAND_DETECT_S = 1.0
 _BATT_LOW_TIMER_S = 10.0
 
 
-class Autopilot:
+class Autopilot(NavigationMixin):
     """The emulated flight controller of one vehicle.
 
     Parameters
@@ -167,9 +168,7 @@ class Autopilot:
             return False, reason
         if new == self.mode:
             return True, ""
-        nav_ctl = self.navigator
-        why = (nav_ctl.refusal(new, self.land_complete) if nav_ctl is not None else
-               f"Mode change to {new.name} failed: unsupported" if new in NAV_MODES else "")
+        why = self._nav_refusal(new)
         if why:
             self._say(SEVERITY_WARNING, why)
             return False, why
@@ -186,16 +185,6 @@ class Autopilot:
         nav = self._last_nav
         self.climb_ctl.reset(-nav.vd if nav is not None and not self.land_complete else 0.0)
         self._nav_enter(now_ns)
-
-    def _nav_enter(self, now_ns: int) -> None:
-        imu, nav = self._last_imu, self._last_nav
-        if self.navigator is not None and imu is not None and nav is not None:
-            self.navigator.enter(self.mode, nav, imu.yaw, self.land_complete, now_ns)
-
-    def _nav_flies(self) -> bool:
-        """Whether the navigator flies now: its modes, and GUIDED without an attitude target."""
-        return self.navigator is not None and (self.mode in NAV_MODES or
-                                               (self.mode == Mode.GUIDED and self.target is None))
 
     def arm(self, now_ns: int, force: bool = False) -> tuple[bool, str]:
         """Arm (checks: :func:`~sitl.copter.arming.arming_failure`); returns ``(ok, reason)``."""
@@ -388,25 +377,11 @@ class Autopilot:
             return self._ground_idle()
         return self._fly(self._level_q(), (0.0, 0.0, 0.0), False, 0.0, False, dt, imu)
 
-    def _run_nav(self, now_ns: int, dt: float, imu: ImuReading, nav: NavReading) -> tuple[float, float, float, float]:
-        d = self.navigator.update(now_ns, dt, nav, imu.yaw)  # type: ignore[union-attr]
-        if self.land_complete:
-            if d.land and self.mode != Mode.GUIDED:
-                self.disarm(now_ns, force=True, why="landed")
-                return (0.0, 0.0, 0.0, 0.0)
-            if d.land or not self.navigator.wants_takeoff(nav):  # type: ignore[union-attr]
-                return self._ground_idle()
-            self.land_complete = False
-            self._landed_since_ns = None
-            self._reset_loops()
-        return self._fly(d.q, (0.0, 0.0, 0.0), False, self._climb_throttle(d.climb_m_s, dt, nav), True, dt, imu)
-
     def _descent_demanded(self) -> bool:
         if self.throttle >= 0.85 * self._hover:
             return False
         if self._nav_flies():
-            last = self.navigator.last  # type: ignore[union-attr]
-            return last is None or last.land or last.climb_m_s <= 0.0
+            return self._nav_descending()
         if self.mode == Mode.LAND:
             return True
         t = self.target
