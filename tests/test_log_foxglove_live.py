@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import math
 import socket
 import struct
 import subprocess
@@ -62,12 +63,24 @@ async def _first_message_once(port: int, topic: str, deadline: float) -> tuple[d
             msg = json.loads(await asyncio.wait_for(ws.recv(), deadline - time.monotonic()))
             if msg.get("op") == "advertise":
                 channel = next((c for c in msg["channels"] if c["topic"] == topic), None)
-        await ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 3, "channelId": channel["id"]}]}))
+        # A subscription racing the channel's advertisement is refused by the SDK ("unknown channel"):
+        # subscribe again (a new id) every second until data comes, as a viewer would.
+        sub_id, subscribed_at = 3, -math.inf
         while True:
-            msg = await asyncio.wait_for(ws.recv(), deadline - time.monotonic())
+            if time.monotonic() - subscribed_at > 1.0:
+                sub_id += 1
+                await ws.send(json.dumps({"op": "subscribe",
+                                          "subscriptions": [{"id": sub_id, "channelId": channel["id"]}]}))
+                subscribed_at = time.monotonic()
+            try:
+                msg = await asyncio.wait_for(ws.recv(), min(1.0, deadline - time.monotonic()))
+            except TimeoutError:
+                if time.monotonic() > deadline:
+                    raise
+                continue
             if isinstance(msg, bytes) and msg[0] == MESSAGE_DATA:
                 sub, t = struct.unpack_from("<IQ", msg, 1)
-                assert sub == 3
+                assert 3 < sub <= sub_id
                 return channel, t, msg[13:]
 
 

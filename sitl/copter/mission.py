@@ -272,12 +272,17 @@ class MissionProtocol:
             return
         self._begin(msg, link, t, 0, n - 1, n, now_ns, out)
 
-    def _partial(self, msg, link, now_ns: int, out: list) -> None:
+    def _idle_type(self, msg, out: list) -> int | None:
+        """The message's mission type, None (answered) if it is bad or being uploaded (DENIED)."""
         t = self._type(msg, out)
-        if t is None:
-            return
-        if t in self._uploads:
+        if t is not None and t in self._uploads:
             self._ack(msg, M.MAV_MISSION_DENIED, t, out)
+            return None
+        return t
+
+    def _partial(self, msg, link, now_ns: int, out: list) -> None:
+        t = self._idle_type(msg, out)
+        if t is None:
             return
         n = self._count_of(t)
         start, end = int(msg.start_index), int(msg.end_index)
@@ -341,11 +346,8 @@ class MissionProtocol:
 
     # ------------------------------------------------------------------ download
     def _request_list(self, msg, link, now_ns: int, out: list) -> None:
-        t = self._type(msg, out)
+        t = self._idle_type(msg, out)
         if t is None:
-            return
-        if t in self._uploads:
-            self._ack(msg, M.MAV_MISSION_DENIED, t, out)
             return
         out.append(M.MAVLink_mission_count_message(msg.get_srcSystem(), msg.get_srcComponent(), self._count_of(t), t))
 

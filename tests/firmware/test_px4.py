@@ -160,8 +160,9 @@ def _fly_until(args: list[str], env: dict, t_s: float) -> subprocess.Popen:
     proc = subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     for line in proc.stdout:  # type: ignore[union-attr]
         if line.startswith("t ") and float(line.split()[1]) >= t_s:
-            break
-    return proc
+            return proc
+    _, err = proc.communicate(timeout=60)  # ended before its mission clock got there: say why
+    raise AssertionError(f"gcs fly ended (exit {proc.returncode}) before mission time {t_s:g} s:\n{err[-2000:]}")
 
 
 def test_a_frozen_ground_station_leaves_px4_level_and_landed(tmp_path):
