@@ -18,6 +18,11 @@ class NavigationMixin:
         if self.navigator is not None and imu is not None and nav is not None:
             self.navigator.enter(self.mode, nav, imu.yaw, self.land_complete, now_ns)
 
+    def position_control(self, now_ns: int) -> None:
+        """GUIDED from now on flies the navigator's targets (an attitude target would take over again)."""
+        self.target = None
+        self._timer_ns = now_ns
+
     def _nav_refusal(self, mode: Mode) -> str:
         """Why a change to ``mode`` is refused ("" if it is not)."""
         if self.navigator is None:

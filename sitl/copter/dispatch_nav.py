@@ -69,7 +69,7 @@ def nav_command(sim, cmd: int, p: tuple[float, ...], frame: int | None, now_ns: 
             return _DENIED, "bad altitude"
         if ap.mode != Mode.GUIDED or not ap.armed or not ap.land_complete:
             return _FAILED, "takeoff needs GUIDED, armed, landed"
-        ap.target = None
+        ap.position_control(now_ns)
         nav_ctl.takeoff(alt, sim.nav)
         return _ACCEPTED, ""
     if cmd == M.MAV_CMD_NAV_RETURN_TO_LAUNCH:
@@ -107,7 +107,7 @@ def _reposition(sim, p, frame: int | None, now_ns: int) -> tuple[int, str]:
         ok, why = ap.set_mode(Mode.GUIDED, now_ns)
         if not ok:
             return _FAILED, why
-    ap.target = None
+    ap.position_control(now_ns)
     if math.isfinite(p[0]) and p[0] > 0:
         ap.navigator.set_speed(p[0])
     yaw = math.radians(p[3]) if math.isfinite(p[3]) else None
@@ -158,8 +158,7 @@ def nav_message(sim, msg, now_ns: int) -> bool:
         ap.targets_rejected += 1
         return False
     yaw = None if mask & _YAW_IGNORE else float(msg.yaw)
-    ap.target = None  # position control from now on (an attitude target would take over again)
-    ap._timer_ns = now_ns
+    ap.position_control(now_ns)
     if vel is not None and pos is None:
         nav_ctl.set_velocity(*vel, yaw, sim.nav, now_ns)
     else:

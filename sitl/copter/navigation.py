@@ -133,12 +133,18 @@ class Navigator:
         self._item: MissionItem | None = None
         self._hold_level = False  # ALT_HOLD: no horizontal control
         self.last: NavDemand | None = None
+        self._home_key: tuple[float, float, float] | None = None
+        self._home_ned = (0.0, 0.0, 0.0)
 
     # ------------------------------------------------------------------ geometry
     def home_ned(self) -> tuple[float, float, float]:
+        """Home as NED [m] from the origin (recomputed only when home moves: RTL reads it every tick)."""
         h, (lat0, lon0, alt0) = self.home, self.origin
-        n, e = local_from_geodetic(lat0, lon0, h.lat_deg, h.lon_deg)
-        return n, e, alt0 - h.alt_m
+        key = (h.lat_deg, h.lon_deg, h.alt_m)
+        if key != self._home_key:
+            n, e = local_from_geodetic(lat0, lon0, h.lat_deg, h.lon_deg)
+            self._home_key, self._home_ned = key, (n, e, alt0 - h.alt_m)
+        return self._home_ned
 
     def item_ned(self, it: MissionItem, nav: NavReading) -> tuple[float, float, float] | None:
         """A mission item's position, NED [m] (None: a frame not flown)."""
