@@ -177,6 +177,39 @@ def test_configure_sets_the_offboard_loss_failsafe_and_reads_the_adapters_values
         Px4Profile().configure(_Params(dict(params.values, MPC_THR_HOVER=0.0)), None, "attitude")
 
 
+def test_the_setpoint_loss_in_effect_is_the_lower_com_of_loss_t():
+    base = {"COM_OBL_RC_ACT": 4, "COM_DISARM_LAND": 2.0, "MPC_THR_HOVER": 0.5}
+    p = Px4Profile()
+    assert p.setpoint_loss_s is None  # not configured yet: no rule
+    p.configure(_Params(dict(base, COM_OF_LOSS_T=1.0)), None)
+    assert p.setpoint_loss_s == OFFBOARD_LOSS_S
+    p.configure(_Params(dict(base, COM_OF_LOSS_T=0.2)), None)  # a lower one is left alone and is what counts
+    assert p.setpoint_loss_s == pytest.approx(0.2)
+    assert ArduPilotProfile.setpoint_loss_s is None  # GUIDED keeps its mode through a gap
+
+
+def test_a_gap_in_our_setpoints_beyond_px4s_loss_time_is_control_lost():
+    """A stalled ground station (SIGSTOP 2 s, measured on PX4 SITL) can miss the HEARTBEATs of PX4's
+    Land (an overflowing socket) and PX4 hands offboard back to the next setpoint: the gap itself
+    ends the flight as the vehicle's."""
+    from gcs.vehicles.mavlink import MavlinkSession
+
+    now = [0]
+    profile = Px4Profile()
+    profile.setpoint_loss_s = 0.5
+    s = SimpleNamespace(profile=profile, _last_setpoint_ns=None, ctx=SimpleNamespace(now_ns=lambda: now[0]))
+    gap = MavlinkSession._setpoint_gap
+    assert gap(s) is None  # no setpoint sent yet
+    s._last_setpoint_ns = 1_000_000_000
+    now[0] = 1_490_000_000
+    assert gap(s) is None
+    now[0] = 3_050_000_000
+    said = gap(s)
+    assert said is not None and "2.05 s" in said and "COM_OF_LOSS_T = 0.5 s" in said and "PX4" in said
+    s.profile = ArduPilotProfile()
+    assert gap(s) is None
+
+
 def test_the_drag_of_a_vehicle_px4_simulates_itself_comes_from_sih():
     base = {"COM_OBL_RC_ACT": 4, "COM_OF_LOSS_T": 0.5, "COM_DISARM_LAND": 2.0, "MPC_THR_HOVER": 0.5}
     assert Px4Profile().configure(_Params(base), None).drag_1_s is None  # a real vehicle: the config's

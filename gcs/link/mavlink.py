@@ -20,8 +20,10 @@ The link knows nothing of the paper's frame; :mod:`gcs.flight.telemetry` convert
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
+import socket
 import time
 from dataclasses import dataclass, field
 from collections.abc import Callable, Iterable
@@ -44,6 +46,10 @@ from quadrotor.mavlink.signing import SignatureCheck, setup_signing
 mavutil.set_dialect("ardupilotmega")
 
 __all__ = ["LinkError", "MavlinkLink", "LinkCounters"]
+
+#: Receive buffer asked for a UDP link [B] (the kernel caps it at net.core.rmem_max): seconds of
+#: a 100 Hz telemetry set, so that a stall of this process loses nothing the vehicle said.
+UDP_RECEIVE_BUFFER_B = 4 * 1024 * 1024
 
 
 
@@ -133,6 +139,11 @@ class MavlinkLink(MessageWaiter):
         #: name -> MAV_PARAM_TYPE, as the vehicle last reported it.
         self.param_types: dict[str, int] = {}
         self._udp = isinstance(self.conn, mavutil.mavudp)
+        if self._udp:
+            # A stalled ground station (a paused process, a swapping laptop) must find what the vehicle
+            # said meanwhile, its mode changes above all: Linux's default 208 KiB holds < 1 s of telemetry.
+            with contextlib.suppress(OSError):
+                self.conn.port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, UDP_RECEIVE_BUFFER_B)
         #: Other ground stations (:class:`gcs.link.forward.Forwarder`, ``gcs fly --out``); None = none.
         self.forwarder = None
 

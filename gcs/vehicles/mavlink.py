@@ -114,6 +114,8 @@ class MavlinkSession:
         #: The preflight found the vehicle ready (its streams flowing): from then on they are watched.
         self.ready = False
         self._gone_checked = 0
+        #: Loop time [ns] of our last setpoint (None before the first).
+        self._last_setpoint_ns: int | None = None
 
     # ------------------------------------------------------------------ wiring and I/O
     def attach(self, ctx: FlightContext) -> None:
@@ -302,7 +304,21 @@ class MavlinkSession:
         return None if failure is None else ("telemetry_slow", failure)
 
     def control_lost(self) -> str | None:
-        return self.profile.control_lost(self.telemetry.status)
+        lost = self.profile.control_lost(self.telemetry.status)
+        return lost if lost is not None else self._setpoint_gap()
+
+    def _setpoint_gap(self) -> str | None:
+        """Our setpoints stopped for longer than the vehicle's limit (this ground station stalled):
+        its failsafe has the vehicle even if no HEARTBEAT has said so yet (a stall can overflow the
+        socket), and PX4 would hand it back to our next setpoint. We do not take it back."""
+        loss_s, last = getattr(self.profile, "setpoint_loss_s", None), self._last_setpoint_ns
+        if loss_s is None or last is None or self.ctx is None:
+            return None
+        gap_s = (self.ctx.now_ns() - last) * 1e-9
+        if gap_s <= loss_s:
+            return None
+        return (f"no setpoint from us for {gap_s:.2f} s, beyond {self.profile.setpoint_loss_param} = {loss_s:g} s: "
+                f"{self.profile.name}'s failsafe has it")
 
     def mission_origin(self, state: State) -> tuple[float, float, float]:
         return (state.x, state.y, state.z)
@@ -310,6 +326,8 @@ class MavlinkSession:
     def send(self, state: State, command: Command) -> None:
         fields = self.adapter.fields(state, command)  # type: ignore[union-attr]
         self.send_message(self.adapter.encode(fields, self.telemetry.status.time_boot_ms))  # type: ignore[union-attr]
+        if self.ctx is not None:
+            self._last_setpoint_ns = self.ctx.now_ns()
 
     def housekeeping(self) -> None:
         self.io.quietly(self.link.send_heartbeat)
@@ -332,6 +350,8 @@ class MavlinkSession:
                 # A failsafe of the autopilot's own left it hovering (PX4 Hold): nobody flies it; land it.
                 self.event("failsafe", f"the vehicle hovers in {st.mode} by itself: landing it")
                 self._land(reason)
+            elif not st.armed:
+                self.event("landed", "landed and disarmed")
         else:
             self._land(reason)
 

@@ -61,6 +61,8 @@ class Px4Profile:
 
     name = "PX4"
     control_name = "offboard control"
+    #: The parameter behind :attr:`setpoint_loss_s` (for messages).
+    setpoint_loss_param = "COM_OF_LOSS_T"
     flight_mode = OFFBOARD
     land_mode = LAND
     control_modes = (OFFBOARD,)
@@ -74,6 +76,10 @@ class Px4Profile:
 
     def __init__(self, events=None) -> None:
         self.events = events
+        #: COM_OF_LOSS_T in effect for the flight [s], once :meth:`configure` has set it: a gap in our
+        #: setpoints longer than this has put PX4 in its offboard-loss failsafe (Land), and PX4 would
+        #: hand the vehicle back to the first setpoint after it; we do not take it back.
+        self.setpoint_loss_s: float | None = None
 
     @staticmethod
     def mode_name(custom_mode: int) -> str:
@@ -110,7 +116,7 @@ class Px4Profile:
         """
         if output is not None:
             self.check_output(output, firmware)
-        self._offboard_loss(params)
+        self.setpoint_loss_s = self._offboard_loss(params)
         hover = params.get("MPC_THR_HOVER", None)
         if not 0.05 <= hover <= 0.95:
             raise PreflightRefused(f"MPC_THR_HOVER = {hover:g} is not a plausible hover thrust (0.05..0.95)")
@@ -148,8 +154,9 @@ class Px4Profile:
         refuse_untaken_actuator(output, firmware)
 
     @staticmethod
-    def _offboard_loss(params) -> None:
-        """COM_OBL_RC_ACT = Land, COM_OF_LOSS_T down to :data:`OFFBOARD_LOSS_S`, COM_DISARM_LAND on."""
+    def _offboard_loss(params) -> float:
+        """COM_OBL_RC_ACT = Land, COM_OF_LOSS_T down to :data:`OFFBOARD_LOSS_S`, COM_DISARM_LAND on;
+        the COM_OF_LOSS_T in effect [s]."""
         act = params.get("COM_OBL_RC_ACT", None)
         if int(act) != OBL_LAND:
             new = params.set("COM_OBL_RC_ACT", float(OBL_LAND), act)
@@ -169,6 +176,7 @@ class Px4Profile:
             if new <= 0:
                 raise PreflightRefused("the vehicle did not accept COM_DISARM_LAND = 2 s (disarm once landed)")
             params.said(f"COM_DISARM_LAND {disarm:g} -> 2 s (a landed vehicle disarms itself)")
+        return min(float(loss), OFFBOARD_LOSS_S)
 
     control_lost = control_lost
 

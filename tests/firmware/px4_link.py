@@ -54,9 +54,14 @@ class Px4LinkProxy:
         self.swallowed = 0
         self.armed = False
         self.armed_at: float | None = None
+        self.disarmed_at: float | None = None
         self.custom_modes: list[int] = []
         self.max_tilt_deg = 0.0
         self.max_tilt_deg_in_blackout = 0.0
+        self.tilt_deg: list[tuple[float, float]] = []  # (monotonic time [s], tilt [deg]) of every ATTITUDE
+        #: (monotonic time [s], LOCAL_POSITION_NED z [m], vz [m/s]), NED: down positive.
+        self.z_ned_m: list[tuple[float, float, float]] = []
+        self.touchdown_at = math.inf
         self._blackout: tuple[float, float] | None = None
         self._after_arming: tuple[float, float] | None = None
         self._down = mavlink.MAVLink(None)
@@ -83,6 +88,34 @@ class Px4LinkProxy:
     def blackout_after_arming(self, after_s: float, length_s: float) -> None:
         """A :meth:`blackout` ``after_s`` [s] after PX4 reports itself armed."""
         self._after_arming = (after_s, length_s)
+
+    def tilt_split_deg(self, since: float, *, near_m: float = 0.5, still_m_s: float = 0.2) -> tuple[float, float]:
+        """The largest tilt [deg] from monotonic time ``since`` [s] until touchdown, and after it.
+
+        Touchdown is the first LOCAL_POSITION_NED after ``since``, once the vehicle has been higher,
+        within ``near_m`` of the height PX4 estimated when it last disarmed and descending slower than
+        ``still_m_s`` (the estimate drifts by tenths of a metre between boot, touchdown and disarming).
+        On the ground SIH's contact model lets the airframe rock while the land detector decides
+        (measured up to 14 deg on a loaded machine), which says nothing about how it flew down.
+        """
+        samples = [(t, z, vz) for t, z, vz in list(self.z_ned_m) if t >= since]
+        end = self.disarmed_at if self.disarmed_at is not None else math.inf
+        at_end = [z for t, z, _ in samples if t < end]
+        tilts = list(self.tilt_deg)
+        if not at_end:
+            return max((a for t, a in tilts if t >= since), default=0.0), 0.0
+        ground = at_end[-1]
+        touchdown, airborne = math.inf, False
+        for t, z, vz in samples:
+            if z < ground - near_m - 0.2:
+                airborne = True
+            elif airborne and z >= ground - near_m and vz < still_m_s:
+                touchdown = t
+                break
+        self.touchdown_at = touchdown
+        air = max((a for t, a in tilts if since <= t < touchdown), default=0.0)
+        ground_tilt = max((a for t, a in tilts if touchdown <= t), default=0.0)
+        return air, ground_tilt
 
     def in_blackout(self) -> bool:
         b = self._blackout
@@ -123,12 +156,17 @@ class Px4LinkProxy:
                     self.armed_at = time.monotonic()
                     if self._after_arming is not None:
                         self.blackout(*self._after_arming)
+                if self.armed and not armed:
+                    self.disarmed_at = time.monotonic()
                 self.armed = armed
                 if not self.custom_modes or self.custom_modes[-1] != m.custom_mode:
                     self.custom_modes.append(m.custom_mode)
+            elif t == "LOCAL_POSITION_NED":
+                self.z_ned_m.append((time.monotonic(), m.z, m.vz))
             elif t == "ATTITUDE":
                 tilt = math.degrees(math.acos(max(-1.0, min(1.0, math.cos(m.roll) * math.cos(m.pitch)))))
                 self.max_tilt_deg = max(self.max_tilt_deg, tilt)
+                self.tilt_deg.append((time.monotonic(), tilt))
                 if dark:
                     self.max_tilt_deg_in_blackout = max(self.max_tilt_deg_in_blackout, tilt)
         if not dark:
