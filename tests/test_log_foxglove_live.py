@@ -19,7 +19,7 @@ import websockets
 from gcs.cli import main
 from gcs.log import foxglove as F
 from gcs.log import topics as T
-from gcs.log.foxglove_live import LiveServer, parse_address, tee
+from gcs.log.foxglove_live import LIVE_TOPICS, LiveServer, parse_address, tee
 from gcs.log.mcap.reader import read_log
 from gcs.log.writer import FlightLog
 
@@ -99,6 +99,25 @@ def test_a_bad_address_is_a_usage_error_and_live_needs_the_log(capsys):
     assert e.value.code == 2 and "--live" in capsys.readouterr().err
     assert main(["fly", "--live", "8765", "--no-log"]) == 2
     assert "not with --no-log" in capsys.readouterr().err
+
+
+def test_the_topics_of_every_flight_are_advertised_before_their_first_message():
+    live = LiveServer("127.0.0.1", 0, topics=LIVE_TOPICS)
+    try:
+        async def advertised() -> set[str]:
+            async with websockets.connect(f"ws://127.0.0.1:{live.port}", subprotocols=SUBPROTOCOLS,
+                                          open_timeout=5) as ws:
+                seen: set[str] = set()
+                while not set(LIVE_TOPICS) <= seen:
+                    m = json.loads(await asyncio.wait_for(ws.recv(), 30))
+                    if m.get("op") == "advertise":
+                        seen |= {c["topic"] for c in m["channels"]}
+                return seen
+
+        seen = asyncio.run(advertised())
+    finally:
+        live.close()
+    assert set(LIVE_TOPICS) <= seen and live.published == 0
 
 
 def test_a_log_served_live_gives_the_same_messages(tmp_path):

@@ -18,7 +18,13 @@ from typing import Any
 
 from gcs.log import topics as T
 
-__all__ = ["DEFAULT_HOST", "LiveServer", "live_argument", "parse_address", "start_for", "tee"]
+__all__ = ["DEFAULT_HOST", "LIVE_TOPICS", "LiveServer", "live_argument", "parse_address", "start_for", "tee"]
+
+#: Topics every flight's log carries, advertised as the server starts: a viewer connecting early subscribes
+#: to them at once.  (A channel created with its first message can race a viewer's subscription, which
+#: the SDK then refuses as "unknown channel" without a word to the viewer.)
+LIVE_TOPICS = (T.STATE, T.REFERENCE, T.COMMAND, T.EVENTS, T.FOXGLOVE_TF, T.FOXGLOVE_VEHICLE_POSE,
+               T.FOXGLOVE_REFERENCE_POSE, T.FOXGLOVE_LOG)
 
 #: Host served when ``--live`` names a port only (this machine; ``0.0.0.0`` serves every interface).
 DEFAULT_HOST = "127.0.0.1"
@@ -55,6 +61,8 @@ class LiveServer:
         0: a free port (see :attr:`port`).
     name : str
         The server name viewers show.
+    topics : iterable of str
+        Channels advertised at once (others appear with their first message).
 
     Raises
     ------
@@ -62,7 +70,8 @@ class LiveServer:
         The server could not start (the port is taken, foxglove-sdk is not installed).
     """
 
-    def __init__(self, host: str = DEFAULT_HOST, port: int = 8765, name: str = "gcs") -> None:
+    def __init__(self, host: str = DEFAULT_HOST, port: int = 8765, name: str = "gcs",
+                 topics: Iterable[str] = ()) -> None:
         try:
             import foxglove
         except ImportError:
@@ -79,6 +88,8 @@ class LiveServer:
         self.published = 0
         #: Messages the SDK refused (counted; the log has them all the same).
         self.failed = 0
+        for topic in topics:
+            self._channel(topic)
 
     @property
     def port(self) -> int:
@@ -129,7 +140,7 @@ def start_for(log: Any, address: str) -> LiveServer | None:
     the flight and its log go on without it."""
     try:
         host, port = parse_address(address)
-        live = LiveServer(host, port)
+        live = LiveServer(host, port, topics=LIVE_TOPICS)
     except (ValueError, RuntimeError) as exc:
         print(f"gcs: warning: {exc}; flying without the live view", file=sys.stderr)
         return None
