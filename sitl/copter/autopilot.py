@@ -118,7 +118,8 @@ class Autopilot(NavigationMixin):
         self._disarm_delay_ns = p["DISARM_DELAY"] * 1e9
 
     # ------------------------------------------------------------------ helpers
-    def _say(self, severity: int, text: str) -> None:
+    def say(self, severity: int, text: str) -> None:
+        """A STATUSTEXT for the ground station (MAV_SEVERITY ``severity``; cut at its 50 characters)."""
         self.events.append((severity, text[:50]))
 
     def _p(self, name: str) -> float:
@@ -164,13 +165,13 @@ class Autopilot(NavigationMixin):
             new = Mode(int(mode))
         except ValueError:
             reason = f"Mode change to {int(mode)} failed: unsupported"
-            self._say(SEVERITY_WARNING, reason)
+            self.say(SEVERITY_WARNING, reason)
             return False, reason
         if new == self.mode:
             return True, ""
         why = self._nav_refusal(new)
         if why:
-            self._say(SEVERITY_WARNING, why)
+            self.say(SEVERITY_WARNING, why)
             return False, why
         self._enter(new, now_ns)
         self.failsafe = ""
@@ -194,7 +195,7 @@ class Autopilot(NavigationMixin):
             reason = arming_failure(self.mode, now_ns, self.prearm_delay_ns, self.params, self._last_imu,
                                     self._last_nav, self._battery, self._r_int)
             if reason:
-                self._say(SEVERITY_CRITICAL, f"Arm: {reason}")
+                self.say(SEVERITY_CRITICAL, f"Arm: {reason}")
                 return False, reason
         self.armed = True
         self.land_complete = True
@@ -207,7 +208,7 @@ class Autopilot(NavigationMixin):
         self._yaw_hold = imu.yaw if imu is not None else 0.0
         self._reset_loops()
         self._nav_enter(now_ns)
-        self._say(SEVERITY_INFO, "Arming motors")
+        self.say(SEVERITY_INFO, "Arming motors")
         return True, ""
 
     def disarm(self, now_ns: int, force: bool = False, why: str = "") -> tuple[bool, str]:
@@ -215,13 +216,13 @@ class Autopilot(NavigationMixin):
         if not self.armed:
             return True, ""
         if not force and not self.land_complete:
-            self._say(SEVERITY_CRITICAL, "Disarm: vehicle is flying")
+            self.say(SEVERITY_CRITICAL, "Disarm: vehicle is flying")
             return False, "vehicle is flying"
         self.armed = False
         self.land_complete = True
         self.target = None
         self._reset_loops()
-        self._say(SEVERITY_INFO, f"Disarming motors{': ' + why if why else ''}")
+        self.say(SEVERITY_INFO, f"Disarming motors{': ' + why if why else ''}")
         return True, ""
 
     def set_attitude_target(self, type_mask: int, q: Sequence[float], rates: Sequence[float], thrust: float,
@@ -295,14 +296,14 @@ class Autopilot(NavigationMixin):
             self._batt_low_since_ns = now_ns
         elif not self._batt_announced and now_ns - self._batt_low_since_ns >= _BATT_LOW_TIMER_S * 1e9:
             self._batt_announced = True
-            self._say(SEVERITY_WARNING, f"Battery 1 is low {rest:.2f}V used {battery.consumed_mah:.0f} mAh")
+            self.say(SEVERITY_WARNING, f"Battery 1 is low {rest:.2f}V used {battery.consumed_mah:.0f} mAh")
             if self._p("BATT_FS_LOW_ACT") >= 1 and self.mode != Mode.LAND:
                 self._enter(Mode.LAND, now_ns)
                 self.failsafe = "battery"
 
     def _guided_timeout(self, now_ns: int) -> None:
         """No target for GUID_TIMEOUT in a guided mode: level and LAND (the emulations override it)."""
-        self._say(SEVERITY_WARNING, f"Guided timeout: no target for {self._timeout_ns * 1e-9:g} s, LAND")
+        self.say(SEVERITY_WARNING, f"Guided timeout: no target for {self._timeout_ns * 1e-9:g} s, LAND")
         self._enter(Mode.LAND, now_ns)
         self.failsafe = "guided timeout"
 

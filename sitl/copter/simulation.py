@@ -119,7 +119,7 @@ class Simulation:
         h = vehicle.home
         self.home = Home(h.lat_deg, h.lon_deg, h.alt_m)
         self.autopilot.navigator = Navigator(self.params, vehicle.gravity_m_s2, self.missions,
-                                             (h.lat_deg, h.lon_deg, h.alt_m), self.home, self.autopilot._say)
+                                             (h.lat_deg, h.lon_deg, h.alt_m), self.home, self.autopilot.say)
         self.time_ns = 0
         k = self.world.kinematics
         self.imu = self.sensors.imu(k)

@@ -80,7 +80,7 @@ class ArduCopterAutopilot(Autopilot):
         """Refused with "PreArm: ..." until the EKF is ready, then the built-in checks; starts the arming delay."""
         reason = "" if force else self.readiness.prearm_reason(now_ns * 1e-9)
         if reason and not self.armed:
-            self._say(SEVERITY_CRITICAL, f"PreArm: {reason}")
+            self.say(SEVERITY_CRITICAL, f"PreArm: {reason}")
             return False, reason
         was = self.armed
         ok, why = super().arm(now_ns, force)
@@ -119,7 +119,7 @@ class ArduCopterAutopilot(Autopilot):
         self._now_s = now_ns * 1e-9
         self.att.filter_gyro((imu.p, imu.q, imu.r))
         for text in self.readiness.news(self._now_s):
-            self._say(SEVERITY_INFO, text)
+            self.say(SEVERITY_INFO, text)
         return super().update(now_ns, dt, imu, nav, battery)
 
     def _q_body(self) -> tuple[float, float, float, float]:
