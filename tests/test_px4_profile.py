@@ -201,7 +201,7 @@ def test_a_gap_in_our_setpoints_beyond_px4s_loss_time_is_control_lost():
     gap = MavlinkSession._setpoint_gap
     assert gap(s) is None  # no setpoint sent yet
     s._last_setpoint_ns = 1_000_000_000
-    now[0] = 1_490_000_000
+    now[0] = 2_090_000_000  # past COM_OF_LOSS_T but within the vehicle's reaction: the HEARTBEATs decide
     assert gap(s) is None
     now[0] = 3_050_000_000
     said = gap(s)
