@@ -194,16 +194,16 @@ def test_a_gap_in_our_setpoints_beyond_px4s_loss_time_is_control_lost():
     ends the flight as the vehicle's."""
     from gcs.vehicles.mavlink import MavlinkSession
 
-    now = [0]
     profile = Px4Profile()
     profile.setpoint_loss_s = 0.5
-    s = SimpleNamespace(profile=profile, _last_setpoint_ns=None, ctx=SimpleNamespace(now_ns=lambda: now[0]))
+    status = SimpleNamespace(time_boot_ms=0)  # the vehicle's clock, from its telemetry
+    s = SimpleNamespace(profile=profile, _last_setpoint_ms=None, telemetry=SimpleNamespace(status=status))
     gap = MavlinkSession._setpoint_gap
     assert gap(s) is None  # no setpoint sent yet
-    s._last_setpoint_ns = 1_000_000_000
-    now[0] = 2_090_000_000  # past COM_OF_LOSS_T but within the vehicle's reaction: the HEARTBEATs decide
+    s._last_setpoint_ms = 1_000
+    status.time_boot_ms = 2_090  # past COM_OF_LOSS_T but within the vehicle's reaction: the HEARTBEATs decide
     assert gap(s) is None
-    now[0] = 3_050_000_000
+    status.time_boot_ms = 3_050
     said = gap(s)
     assert said is not None and "2.05 s" in said and "COM_OF_LOSS_T = 0.5 s" in said and "PX4" in said
     s.profile = ArduPilotProfile()

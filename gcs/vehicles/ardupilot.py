@@ -84,7 +84,6 @@ class ArduPilotProfile:
     #: A gap in our setpoints does not change ArduCopter's mode (GUID_TIMEOUT levels it in GUIDED):
     #: the next setpoint steers again.  None = no such limit.
     setpoint_loss_s: float | None = None
-    setpoint_loss_param = "GUID_TIMEOUT"
     #: Streams asked for the log only (message id -> Hz): none; ArduCopter's link carries enough.
     log_streams_hz: dict[int, float] = {}  # noqa: RUF012  read only
 

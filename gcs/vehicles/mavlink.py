@@ -117,8 +117,8 @@ class MavlinkSession:
         #: The preflight found the vehicle ready (its streams flowing): from then on they are watched.
         self.ready = False
         self._gone_checked = 0
-        #: Loop time [ns] of our last setpoint (None before the first).
-        self._last_setpoint_ns: int | None = None
+        #: The vehicle's time [ms] (its telemetry's ``time_boot_ms``) at our last setpoint (None before the first).
+        self._last_setpoint_ms: int | None = None
 
     # ------------------------------------------------------------------ wiring and I/O
     def attach(self, ctx: FlightContext) -> None:
@@ -316,10 +316,10 @@ class MavlinkSession:
         if no HEARTBEAT has said so yet (a stall can overflow the socket), and PX4 would hand it back
         to our next setpoint. We do not take it back.  (A shorter gap, a loaded machine's hiccup, is
         left to the HEARTBEATs: PX4 may not have noticed it.)"""
-        loss_s, last = getattr(self.profile, "setpoint_loss_s", None), self._last_setpoint_ns
-        if loss_s is None or last is None or self.ctx is None:
+        loss_s, last = self.profile.setpoint_loss_s, self._last_setpoint_ms
+        if loss_s is None or last is None:
             return None
-        gap_s = (self.ctx.now_ns() - last) * 1e-9
+        gap_s = (self.telemetry.status.time_boot_ms - last) * 1e-3  # on the vehicle's clock, as its timer runs
         if gap_s <= loss_s + FAILSAFE_REACTION_S:
             return None
         return (f"no setpoint from us for {gap_s:.2f} s, beyond {self.profile.setpoint_loss_param} = {loss_s:g} s: "
@@ -330,9 +330,9 @@ class MavlinkSession:
 
     def send(self, state: State, command: Command) -> None:
         fields = self.adapter.fields(state, command)  # type: ignore[union-attr]
-        self.send_message(self.adapter.encode(fields, self.telemetry.status.time_boot_ms))  # type: ignore[union-attr]
-        if self.ctx is not None:
-            self._last_setpoint_ns = self.ctx.now_ns()
+        boot_ms = self.telemetry.status.time_boot_ms
+        self.send_message(self.adapter.encode(fields, boot_ms))  # type: ignore[union-attr]
+        self._last_setpoint_ms = boot_ms
 
     def housekeeping(self) -> None:
         self.io.quietly(self.link.send_heartbeat)

@@ -56,12 +56,10 @@ class Px4LinkProxy:
         self.armed_at: float | None = None
         self.disarmed_at: float | None = None
         self.custom_modes: list[int] = []
-        self.max_tilt_deg = 0.0
         self.max_tilt_deg_in_blackout = 0.0
         self.tilt_deg: list[tuple[float, float]] = []  # (monotonic time [s], tilt [deg]) of every ATTITUDE
         #: (monotonic time [s], LOCAL_POSITION_NED z [m], vz [m/s]), NED: down positive.
         self.z_ned_m: list[tuple[float, float, float]] = []
-        self.touchdown_at = math.inf
         self._blackout: tuple[float, float] | None = None
         self._after_arming: tuple[float, float] | None = None
         self._down = mavlink.MAVLink(None)
@@ -89,8 +87,10 @@ class Px4LinkProxy:
         """A :meth:`blackout` ``after_s`` [s] after PX4 reports itself armed."""
         self._after_arming = (after_s, length_s)
 
-    def tilt_split_deg(self, since: float, *, near_m: float = 0.5, still_m_s: float = 0.2) -> tuple[float, float]:
-        """The largest tilt [deg] from monotonic time ``since`` [s] until touchdown, and after it.
+    def tilt_split_deg(self, since: float, *, near_m: float = 0.5,
+                       still_m_s: float = 0.2) -> tuple[float, float, float]:
+        """The largest tilt [deg] from monotonic time ``since`` [s] until touchdown, after it, and the
+        touchdown's monotonic time [s] (inf: none seen).
 
         Touchdown is the first LOCAL_POSITION_NED after ``since``, once the vehicle has been higher,
         within ``near_m`` of the height PX4 estimated when it last disarmed and descending slower than
@@ -103,7 +103,7 @@ class Px4LinkProxy:
         at_end = [z for t, z, _ in samples if t < end]
         tilts = list(self.tilt_deg)
         if not at_end:
-            return max((a for t, a in tilts if t >= since), default=0.0), 0.0
+            return max((a for t, a in tilts if t >= since), default=0.0), 0.0, math.inf
         ground = at_end[-1]
         touchdown, airborne = math.inf, False
         for t, z, vz in samples:
@@ -112,10 +112,9 @@ class Px4LinkProxy:
             elif airborne and z >= ground - near_m and vz < still_m_s:
                 touchdown = t
                 break
-        self.touchdown_at = touchdown
         air = max((a for t, a in tilts if since <= t < touchdown), default=0.0)
         ground_tilt = max((a for t, a in tilts if touchdown <= t), default=0.0)
-        return air, ground_tilt
+        return air, ground_tilt, touchdown
 
     def in_blackout(self) -> bool:
         b = self._blackout
@@ -165,7 +164,6 @@ class Px4LinkProxy:
                 self.z_ned_m.append((time.monotonic(), m.z, m.vz))
             elif t == "ATTITUDE":
                 tilt = math.degrees(math.acos(max(-1.0, min(1.0, math.cos(m.roll) * math.cos(m.pitch)))))
-                self.max_tilt_deg = max(self.max_tilt_deg, tilt)
                 self.tilt_deg.append((time.monotonic(), tilt))
                 if dark:
                     self.max_tilt_deg_in_blackout = max(self.max_tilt_deg_in_blackout, tilt)

@@ -157,13 +157,13 @@ def test_a_dead_link_mid_flight_px4_lands_level_and_gcs_restores(tmp_path):
 
 def _assert_came_down_level(proxy, since: float) -> None:
     """Below 10 deg of tilt from monotonic time ``since`` until touchdown; not tipped over after it."""
-    air, ground = proxy.tilt_split_deg(since)
+    air, ground, touchdown = proxy.tilt_split_deg(since)
     print(f"px4 tilt: {air:.1f} deg in the air, {ground:.1f} deg on the ground")
     if air >= 10.0:
         t_max = max((t for t, a in proxy.tilt_deg if t >= since and a >= air - 1e-9), default=math.nan)
         track = [(round(t - t_max, 1), round(z, 2), round(vz, 2)) for t, z, vz in proxy.z_ned_m[::10]
                  if abs(t - t_max) < 4.0]
-        raise AssertionError(f"tilted {air:.1f} deg in the air; touchdown {proxy.touchdown_at - t_max:+.1f} s from "
+        raise AssertionError(f"tilted {air:.1f} deg in the air; touchdown {touchdown - t_max:+.1f} s from "
                              f"the peak, (t, z, vz) around it: {track}")
     assert ground < 30.0, f"tilted {ground:.1f} deg on the ground: tipped over?"
 
