@@ -15,7 +15,12 @@ one's reference ends:
 After the last phase the final reference is held.  Reference velocities are
 the derivatives of the reference positions; ``zero_velocity=True`` gives the
 paper's literal circle setting with all velocity references zero (erratum 12).
-Attitude references are 0 (yaw held at 0).
+Attitude references are 0 (yaw held at 0).  :meth:`Mission.acceleration` is the
+reference's acceleration (centripetal on a circle, zero on the ramps and holds);
+the flight feeds it forward (``[experiment] acceleration_reference``) as the drift
+of the error dynamics: ``e'' = f(x, u) + d - a_ref``, so it enters the laws exactly
+as a disturbance acceleration ``-a_ref`` does and the tilt a law holds is the one
+that makes the vehicle turn with the reference (:func:`gcs.model.disturbance_tilt`).
 """
 
 from __future__ import annotations
@@ -114,6 +119,17 @@ class Mission:
             cx, cy = seg.center  # type: ignore[misc]
             vx, vy = -w * (y - cy), w * (x - cx)
         return State(x, y, z, vx, vy, vz)
+
+    def acceleration(self, t: float) -> tuple[float, float, float]:
+        """The reference's acceleration (x, y, z up) [m/s^2] at time t: centripetal on a circle,
+        zero elsewhere (the ramps have constant velocity) and with zero velocity references."""
+        seg = self.segment_at(t)
+        if seg is None or self.zero_velocity or seg.phase.kind != "circle":
+            return (0.0, 0.0, 0.0)
+        x, y, _ = self._position(seg, t)
+        cx, cy = seg.center  # type: ignore[misc]
+        w2 = (2.0 * math.pi / seg.phase.period_s) ** 2
+        return (-w2 * (x - cx), -w2 * (y - cy), 0.0)
 
     def hold_window(self, window_s: float = 1.0) -> tuple[float, float]:
         """Time interval of the last ``window_s`` of the last hold or circle phase (the steady state).

@@ -81,6 +81,7 @@ def test_corrected_matrices_are_marked_and_printed_ones_selectable(outdoor):
     (("experiment", "horizon_s"), 0.001, "experiment.horizon_s", "shorter than one step"),
     (("experiment", "after_horizon"), "hover", "experiment.after_horizon", "must be one of"),
     (("experiment", "name"), ..., "experiment.name", "missing"),
+    (("experiment", "acceleration_reference"), "yes", "experiment.acceleration_reference", "must be"),
     (("nlsoc", "z_psi", "R"), [0.47, -0.5], "nlsoc.z_psi.R", "not positive definite"),
     (("nlsoc", "z_psi", "Q"), [[1.0, 2.0], [2.0, 1.0]], "nlsoc.z_psi.Q", "wrong shape: expected 4x4, got 2x2"),
     (("loc", "z", "Q"), [[1.0, 2.0], [3.0, 1.0]], "loc.z.Q", "not symmetric"),

@@ -55,3 +55,18 @@ def test_explicit_circle_centre_and_empty_mission():
     assert math.hypot(r.x, r.y) == pytest.approx(2.0)
     with pytest.raises(ValueError):
         Mission([])
+
+
+def test_acceleration_is_the_derivative_of_the_reference_velocity():
+    m = circle_mission()
+    for t in np.linspace(5.1, 24.9, 25):
+        h = 1e-6
+        a, b = m.reference(t - h), m.reference(t + h)
+        ax, ay, az = m.acceleration(t)
+        assert ax == pytest.approx((b.vx - a.vx) / (2 * h), abs=1e-4)
+        assert ay == pytest.approx((b.vy - a.vy) / (2 * h), abs=1e-4)
+        assert az == 0.0
+        assert math.hypot(ax, ay) == pytest.approx((2 * math.pi / 10.0) ** 2 * 1.0)  # w^2 r, towards the centre
+    for t in (0.0, 2.5, 27.5, 100.0):  # ramps (constant velocity) and after the end
+        assert m.acceleration(t) == (0.0, 0.0, 0.0)
+    assert circle_mission(zero_velocity=True).acceleration(10.0) == (0.0, 0.0, 0.0)

@@ -139,6 +139,7 @@ def _experiment(e: Reader) -> ExperimentConfig:
     after = e.string("after_horizon", "pd", choices=AFTER_HORIZON)
     mode = e.string("matrices", "corrected", choices=MATRIX_MODES)
     zero_vel = e.boolean("zero_velocity_reference", False)
+    accel_ref = e.boolean("acceleration_reference", True)
     axes = e.raw("error_axes", ["z"])
     if (not isinstance(axes, list) or not axes or any(not isinstance(a, str) or a not in ("x", "y", "z") for a in axes)
             or len(set(axes)) != len(axes)):
@@ -146,7 +147,7 @@ def _experiment(e: Reader) -> ExperimentConfig:
     e.done()
     return ExperimentConfig(name=name, description=description, ts_s=ts, horizon_s=horizon, duration_s=duration,
                             after_horizon=after, matrices=mode, zero_velocity_reference=zero_vel,
-                            error_axes=tuple(axes))
+                            acceleration_reference=accel_ref, error_axes=tuple(axes))
 
 
 def _vehicle(v: Reader) -> ReducedParams:

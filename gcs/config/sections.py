@@ -44,7 +44,12 @@ class ExperimentConfig:
         Default simulated duration (``gcs sim --duration`` overrides).
     matrices : {"corrected", "printed"}
     zero_velocity_reference : bool
-        Feed zero velocity references (the paper's literal circle setting).
+        Feed zero velocity references (the paper's literal circle setting; no acceleration
+        references either).
+    acceleration_reference : bool
+        Feed the reference's acceleration forward (default): it enters the laws as a disturbance
+        acceleration does, with the opposite sign (the error dynamics' drift, :mod:`gcs.mission`).
+        False: the attitude references are 0, as the paper prints them.
     error_axes : tuple of str
         Position axes entering J_e (``"z"``, or ``"x", "y", "z"`` for the circle).
     """
@@ -57,6 +62,7 @@ class ExperimentConfig:
     after_horizon: str = "pd"
     matrices: str = "corrected"
     zero_velocity_reference: bool = False
+    acceleration_reference: bool = True
     error_axes: tuple[str, ...] = ("z",)
 
     @property

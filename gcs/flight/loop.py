@@ -74,7 +74,8 @@ class MissionLoop:
     ctx : FlightContext
     controller_name : str
     controller : Controller
-        Designed; stepped ``controller.step(k, state, reference, disturbance_m_s2=session.disturbance_m_s2())``.
+        Designed; stepped ``controller.step(k, state, reference, disturbance_m_s2=d)``, ``d`` the session's
+        estimated disturbance minus the reference's acceleration (:meth:`MissionLoop._drift`).
     session : VehicleSession
     envelope : SafetyEnvelope or None
         Limits, tilt guard and geofence (None: the command goes as the controller gave it).
@@ -105,6 +106,7 @@ class MissionLoop:
         self.ts_ns = int(round(e.ts_s * 1e9))
         self.ticks_per_second = max(1, int(round(1.0 / e.ts_s)))
         self.mission = Mission(config.mission, zero_velocity=e.zero_velocity_reference)
+        self._feed_acceleration = e.acceleration_reference and not e.zero_velocity_reference
         self.duration_s = self.mission.duration_s if duration_s is None else duration_s
         self.mission_steps = int(round(self.duration_s / e.ts_s))
         self.stats = LoopStats(self.ts_ns) if stats else None
@@ -176,7 +178,7 @@ class MissionLoop:
             ref = self._reference(k, t, state, tr)
             if ref is None:
                 return "interrupted" if tr.handled_interrupts else "completed"
-            raw = self.controller.step(k, state, ref, disturbance_m_s2=session.disturbance_m_s2())
+            raw = self.controller.step(k, state, ref, disturbance_m_s2=self._drift(t, tr))
             cmd, reason = self._limit(t, state, raw)
             if reason is not None:
                 return reason
@@ -276,6 +278,15 @@ class MissionLoop:
         r = self.mission.reference(t)
         ox, oy, oz = tr.origin
         return r if ox == oy == oz == 0.0 else r._replace(x=r.x + ox, y=r.y + oy, z=r.z + oz)
+
+    def _drift(self, t: float, tr: _Track) -> tuple[float, float, float]:
+        """The acceleration the laws compensate: the estimated disturbance minus the mission
+        reference's acceleration (fed forward, :meth:`Mission.acceleration`; none in the descent)."""
+        d = self.session.disturbance_m_s2()
+        if not self._feed_acceleration or tr.override is not None:
+            return d
+        a = self.mission.acceleration(t)
+        return d if a[0] == a[1] == a[2] == 0.0 else (d[0] - a[0], d[1] - a[1], d[2] - a[2])
 
     def _limit(self, t: float, state: State, raw: Command) -> tuple[Command, str | None]:
         """The command after the envelope, or the exit reason of a non-finite one (never sent)."""
