@@ -190,6 +190,7 @@ def test_a_frozen_ground_station_leaves_px4_level_and_landed(tmp_path):
         args = [a for a in _connect_args(tmp_path, "stall", port, px4, "--controller", "nlsoc", "--duration", "20")
                 if a != "-q"]
         proc = _fly_until(args, _env(tmp_path), 6.0)
+        stopped = time.monotonic()  # the bound is on the failsafe: SIH rocks the airframe at liftoff (13.5 deg once)
         try:
             proc.send_signal(signal.SIGSTOP)
             time.sleep(2.0)
@@ -199,7 +200,7 @@ def test_a_frozen_ground_station_leaves_px4_level_and_landed(tmp_path):
             if proc.poll() is None:
                 proc.kill()
     assert "Traceback" not in err, err[-2000:]
-    _assert_came_down_level(proxy, 0.0)
+    _assert_came_down_level(proxy, stopped)
     s, ev = _events(tmp_path, "stall")
     assert s["exit_reason"] in ("vehicle_took_over", "telemetry_lost"), s["exit_reason"]
     assert "Land" in ev, ev[-12:]
