@@ -55,21 +55,17 @@ def test_indoor_literal_nlsoc_cannot_lift_off(indoor):
     assert abs(window(run, 55.0, 60.0).mean() - 0.30) < 0.01  # PD lifts it after the horizon
 
 
+def _circle_error(run, t0, t1):
+    t, s, r = run.record.time_s, run.record.state, run.record.ref
+    m = (t > t0) & (t < t1)
+    return np.hypot(s[m, 0] - r[m, 0], s[m, 1] - r[m, 1])
+
+
 @pytest.mark.parametrize("name", CONTROLLERS)
 def test_circle_is_tracked_and_the_vehicle_lands(circle, name):
     run = simulate(circle, name, options=SimOptions(noise=False))
-    t = run.record.time_s
-    s, r = run.record.state, run.record.ref
-    on_circle = (t > 12.0) & (t < 48.0)
-    err = np.hypot(s[on_circle, 0] - r[on_circle, 0], s[on_circle, 1] - r[on_circle, 1])
-    assert err.max() < 0.25
-    assert s[-1, 2] < 0.05
-
-
-def _circle_error(run, t0, t1):
-    t, s, r = run.record.time_s, run.record.state, run.record.ref
-    m = (t >= t0) & (t < t1)
-    return np.hypot(s[m, 0] - r[m, 0], s[m, 1] - r[m, 1])
+    assert _circle_error(run, 12.0, 48.0).max() < 0.25
+    assert run.record.state[-1, 2] < 0.05
 
 
 @pytest.mark.parametrize("name", CONTROLLERS)

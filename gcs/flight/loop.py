@@ -106,7 +106,7 @@ class MissionLoop:
         self.ts_ns = int(round(e.ts_s * 1e9))
         self.ticks_per_second = max(1, int(round(1.0 / e.ts_s)))
         self.mission = Mission(config.mission, zero_velocity=e.zero_velocity_reference)
-        self._feed_acceleration = e.acceleration_reference and not e.zero_velocity_reference
+        self._feed_acceleration = e.acceleration_reference  # zero velocity references: Mission gives 0
         self.duration_s = self.mission.duration_s if duration_s is None else duration_s
         self.mission_steps = int(round(self.duration_s / e.ts_s))
         self.stats = LoopStats(self.ts_ns) if stats else None
