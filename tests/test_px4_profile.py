@@ -16,6 +16,7 @@ from gcs.vehicles.ardupilot import ArduPilotProfile
 from gcs.vehicles.autopilots import profile_for
 from gcs.vehicles.firmware import Firmware
 from gcs.vehicles.px4 import OBL_LAND, OFFBOARD_LOSS_S, Px4Profile
+from gcs.vehicles.profile import velocity_var_m2_s2
 from gcs.vehicles.px4_events import EventMetadata, parse_event
 from gcs.vehicles.px4_modes import HOLD, LAND, OFFBOARD, px4_mode_name
 from quadrotor.mavlink.framing import restore_unknown_header
@@ -217,6 +218,24 @@ def test_the_drag_of_a_vehicle_px4_simulates_itself_comes_from_sih():
     assert Px4Profile().configure(sih, None).drag_1_s == pytest.approx(0.5)
     assert any("SIH_KDV" in t for t in sih.said_lines)
     assert Px4Profile().configure(_Params(dict(base, SIH_KDV=1.0, SIH_MASS=0.0)), None).drag_1_s is None
+
+
+def test_where_sih_simulates_the_vehicle_its_horizontal_velocity_is_taken_from_the_positions():
+    base = {"COM_OBL_RC_ACT": 4, "COM_OF_LOSS_T": 0.5, "COM_DISARM_LAND": 2.0, "MPC_THR_HOVER": 0.5}
+    config_var = (0.0025, 0.0025, 0.0025)
+    real = Px4Profile().configure(_Params(base), None)
+    assert real.horizontal_velocity_std_m_s is None
+    assert velocity_var_m2_s2(config_var, real) == config_var  # a real vehicle: fused as the config says
+    sih = _Params(dict(base, SIH_KDV=1.0, SIH_MASS=1.0))
+    out = Px4Profile().configure(sih, None)
+    assert out.horizontal_velocity_std_m_s == Px4Profile.SIH_HORIZONTAL_VELOCITY_STD_M_S
+    north, east, down = velocity_var_m2_s2(config_var, out)
+    assert north == east == Px4Profile.SIH_HORIZONTAL_VELOCITY_STD_M_S ** 2 >= 1e4 * config_var[0]
+    assert down == config_var[2]  # the vertical velocity is still fused
+    assert any("velocity from the positions" in t for t in sih.said_lines)
+    # kept through the output's own configuration
+    assert Px4Profile().configure_output(sih, "attitude", None, out).horizontal_velocity_std_m_s == \
+        out.horizontal_velocity_std_m_s
 
 
 def test_mode_commands_use_px4s_main_and_sub_modes_and_nav_land():

@@ -33,6 +33,7 @@ from gcs.vehicles.linkio import LinkIO
 from gcs.vehicles.output import OutputAdapter, build_adapter
 from gcs.vehicles.mavlink_preflight import MavlinkPreflight
 from gcs.vehicles.params import ParamJournal, VehicleParams
+from gcs.vehicles.profile import velocity_var_m2_s2
 from gcs.vehicles.streams import StreamMonitor
 from gcs.vehicles.telemetry import Telemetry
 from quadrotor.state import Command, State
@@ -257,6 +258,8 @@ class MavlinkSession:
         drag = out.drag_1_s if out.drag_1_s is not None else v.drag_n_per_m_s / v.mass_kg
         self.estimator.disturbance = (DisturbanceObserver(tau, velocity_bias_time_constant_s=tau, drag_1_s=drag)
                                       if observe else None)
+        fc = self.config.flight
+        self.telemetry.velocity_var = velocity_var_m2_s2((fc.velocity_std_m_s ** 2,) * 3, out)
         self.event("output", f"{self.output_kind}: hover throttle {out.hover_throttle:.3f}, "
                              f"angle gains ({', '.join(f'{g:.4g}' for g in out.angle_gain_1_s)}), rate demand gains "
                              f"{self.config.flight.rate_gain_1_s}; "

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from gcs.errors import PreflightRefused
 from gcs.link.mavlink import LinkError
 
-__all__ = ["OutputParams", "optional_param", "control_lost", "refuse_untaken_actuator"]
+__all__ = ["OutputParams", "velocity_var_m2_s2", "optional_param", "control_lost", "refuse_untaken_actuator"]
 
 
 @dataclass(frozen=True)
@@ -46,6 +46,10 @@ class OutputParams:
     drag_1_s : float or None
         Linear drag per unit mass [1/s] where the autopilot knows its vehicle's (PX4's simulator SIH:
         SIH_KDV / SIH_MASS); None: the config's ``[vehicle] drag_n_per_m_s / mass_kg``.
+    horizontal_velocity_std_m_s : float or None
+        The noise [m/s] to assume for the autopilot's horizontal velocity readings where the profile
+        knows them to be worse than the config's ``[flight] velocity_std_m_s`` (PX4 with SIH: they lag
+        its position, see :mod:`gcs.vehicles.px4`); None: the config's.
     """
 
     hover_throttle: float
@@ -54,6 +58,16 @@ class OutputParams:
     rate_limit_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
     output: str | None = None
     drag_1_s: float | None = None
+    horizontal_velocity_std_m_s: float | None = None
+
+
+def velocity_var_m2_s2(config_var: tuple[float, float, float], out: OutputParams) -> tuple[float, float, float]:
+    """The variances [m^2/s^2] to fuse velocity readings (north, east, down) with: the config's
+    ``config_var``, horizontally the profile's ``out.horizontal_velocity_std_m_s`` squared where set."""
+    if out.horizontal_velocity_std_m_s is None:
+        return config_var
+    h = out.horizontal_velocity_std_m_s ** 2
+    return (h, h, config_var[2])
 
 
 def optional_param(params, name: str) -> float | None:

@@ -21,6 +21,13 @@ is sent to the other):
   MC_ROLL_P/MC_PITCH_P/MC_YAW_P (the angle loop is linear: ``omega = P e``, no square-root
   limit), MC_ROLLRATE_MAX/MC_PITCHRATE_MAX/MC_YAWRATE_MAX (rate limits, deg/s), and where PX4
   simulates the vehicle itself (SIH) its drag SIH_KDV / SIH_MASS for the disturbance observer;
+* where PX4 simulates the vehicle itself (SIH), its horizontal velocity estimate is not fused
+  (:data:`SIH_HORIZONTAL_VELOCITY_STD_M_S`): with SIH's sensor noise (accelerometer 0.5/1.7/1.4
+  m/s^2, GPS 0.2 m) EKF2's LOCAL_POSITION_NED velocity lags its own position by about 1 s on the
+  circle (measured: 0.10 m/s of radial velocity on a 0.31 m/s circle, and 0.2-0.3 m/s RMS from SIH's
+  true velocity against 0.1 m/s for the derivative of its position).  Fused, the mismatch became
+  a false disturbance and the vehicle flew the circle 0.10-0.14 m too wide; our estimator then
+  takes the velocity from the positions;
 * SET_ATTITUDE_TARGET: type_mask 7 makes an attitude setpoint (the rates are not a
   feed-forward: with them PX4 publishes a separate rates setpoint), type_mask 128 a rates
   setpoint; the thrust field is the normalised collective thrust, ``u / (m g) * MPC_THR_HOVER``;
@@ -72,7 +79,11 @@ class Px4Profile:
     hover_modes = (HOLD,)
     #: Streams asked for the log only (message id -> Hz): ATTITUDE_TARGET, which PX4 fills with its rate
     #: setpoint (what its inner loop was asked).
-    log_streams_hz = {mavlink.MAVLINK_MSG_ID_ATTITUDE_TARGET: 50.0}  # noqa: RUF012  read only
+    log_streams_hz = {mavlink.MAVLINK_MSG_ID_ATTITUDE_TARGET: 50.0,  # noqa: RUF012  read only
+                      mavlink.MAVLINK_MSG_ID_HIL_STATE_QUATERNION: 50.0}
+
+    #: The horizontal velocity noise [m/s] assumed where SIH simulates the vehicle: not fused in effect.
+    SIH_HORIZONTAL_VELOCITY_STD_M_S = 10.0
 
     def __init__(self, events=None) -> None:
         self.events = events
@@ -128,7 +139,8 @@ class Px4Profile:
         if min(rate_max) < 0:
             raise PreflightRefused(f"MC_ROLLRATE_MAX/MC_PITCHRATE_MAX/MC_YAWRATE_MAX = {rate_max}: negative limits")
         out = OutputParams(hover, gains, (0.0, 0.0, 0.0), tuple(r * _DEG for r in rate_max),  # type: ignore[arg-type]
-                           drag_1_s=self.simulated_drag(params))
+                           drag_1_s=self.simulated_drag(params),
+                           horizontal_velocity_std_m_s=self.simulated_velocity_std(params))
         return out if output is None else self.configure_output(params, output, firmware, out)
 
     @staticmethod
@@ -143,6 +155,14 @@ class Px4Profile:
         drag = kdv / mass
         params.said(f"drag {drag:.3g} 1/s from SIH_KDV / SIH_MASS (PX4 simulates this vehicle)")
         return drag
+
+    def simulated_velocity_std(self, params) -> float | None:
+        """:data:`SIH_HORIZONTAL_VELOCITY_STD_M_S` where PX4 simulates its own vehicle (SIH_MASS
+        exists), else None (a real vehicle's velocity estimate is fused as the config says)."""
+        if optional_param(params, "SIH_MASS") is None:
+            return None
+        params.said("horizontal velocity from the positions (SIH: EKF2's velocity lags its position)")
+        return self.SIH_HORIZONTAL_VELOCITY_STD_M_S
 
     def configure_output(self, params, output: str, firmware, out: OutputParams) -> OutputParams:
         """What ``output`` needs: PX4 needs no parameter per output; ``actuator`` refused where not taken."""
