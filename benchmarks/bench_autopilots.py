@@ -14,7 +14,8 @@ point the vehicle does (the built-in SITL is the baseline).  The steady-state er
 "altitude steady error": a second flight per cell, outdoor-altitude for ``--altitude-duration``
 seconds (default 25: the 10 s ramp and 15 s of hold), its mean error over the last second.
 On PX4 SIH also the RMS against SIH's true position (HIL_STATE_QUATERNION, which PX4 streams from
-its simulator and gcs logs), "RMS true xy": what the estimate-relative figure does not show.
+its simulator and gcs logs), "RMS true xy": what the estimate-relative figure does not show, beside
+"EKF vs true", PX4's own estimate against that truth (what no off-board controller can remove).
 """
 
 from __future__ import annotations
@@ -27,8 +28,9 @@ import subprocess
 import sys
 import tempfile
 import time
-from bisect import bisect_left
 from pathlib import Path
+
+import numpy as np
 
 from benchlib import document, emit, row
 
@@ -39,6 +41,7 @@ from gcs.vehicles.px4_sitl import locate_px4
 
 ROOT = Path(__file__).resolve().parents[1]
 LIFT_M = 0.05
+EARTH_RADIUS_M = 6371000.0
 
 
 def liftoff_delay_s(log_path: Path) -> float | None:
@@ -57,30 +60,34 @@ def liftoff_delay_s(log_path: Path) -> float | None:
     return None if t_ref is None or t_veh is None else (t_veh - t_ref) / 1e9
 
 
-def true_rms_xy_m(log_path: Path) -> float | None:
-    """RMS horizontal distance [m] of SIH's true position (HIL_STATE_QUATERNION, from PX4's EKF origin
-    GPS_GLOBAL_ORIGIN) from the reference, over the flight; None without ground truth in the log."""
-    log = read_log(log_path, lambda t: t in ("/mavlink/in/HIL_STATE_QUATERNION", "/mavlink/in/GPS_GLOBAL_ORIGIN",
-                                             "/control/reference"))
+def true_rms_xy_m(log_path: Path) -> tuple[float, float] | None:
+    """Against SIH's true position (HIL_STATE_QUATERNION, north/east of PX4's EKF origin
+    GPS_GLOBAL_ORIGIN), over the flight: the RMS horizontal distance [m] of the truth from the
+    reference, and of the truth from PX4's own estimate (LOCAL_POSITION_NED: the floor no off-board
+    controller can go under); None without ground truth in the log."""
+    log = read_log(log_path, lambda t: t in (
+        "/mavlink/in/HIL_STATE_QUATERNION", "/mavlink/in/GPS_GLOBAL_ORIGIN", "/mavlink/in/LOCAL_POSITION_NED",
+        "/control/reference"))
     origin = list(log.decoded("/mavlink/in/GPS_GLOBAL_ORIGIN"))
     truth = [(ns, d) for ns, d in log.decoded("/mavlink/in/HIL_STATE_QUATERNION") if d.get("lat")]
-    ref = list(log.decoded("/control/reference"))
-    if not origin or not truth or len(ref) < 2:
+    ref = np.array([(ns, d["x"], d["y"]) for ns, d in log.decoded("/control/reference")])
+    ekf = np.array([(ns, d["x"], d["y"]) for ns, d in log.decoded("/mavlink/in/LOCAL_POSITION_NED")])
+    if not origin or not truth or len(ref) < 2 or len(ekf) < 2:
         return None
     o = origin[-1][1]
     lat0, lon0 = math.radians(o["latitude"] / 1e7), math.radians(o["longitude"] / 1e7)
-    r_ns = [ns for ns, _ in ref]
-    total, n = 0.0, 0
-    for ns, d in truth:
-        if not r_ns[0] <= ns <= r_ns[-1]:
-            continue
-        i = min(range(max(0, bisect_left(r_ns, ns) - 1), min(len(r_ns), bisect_left(r_ns, ns) + 1)),
-                key=lambda j: abs(r_ns[j] - ns))
-        north = (math.radians(d["lat"] / 1e7) - lat0) * 6371000.0
-        east = (math.radians(d["lon"] / 1e7) - lon0) * 6371000.0 * math.cos(lat0)
-        total += (north - ref[i][1]["x"]) ** 2 + (east - ref[i][1]["y"]) ** 2
-        n += 1
-    return math.sqrt(total / n) if n else None
+    t = np.array([(ns, (math.radians(d["lat"] / 1e7) - lat0) * EARTH_RADIUS_M,
+                   (math.radians(d["lon"] / 1e7) - lon0) * EARTH_RADIUS_M * math.cos(lat0)) for ns, d in truth])
+    t = t[(t[:, 0] >= ref[0, 0]) & (t[:, 0] <= ref[-1, 0])]
+    if not len(t):
+        return None
+
+    def rms_from(a: np.ndarray) -> float:
+        dn = t[:, 1] - np.interp(t[:, 0], a[:, 0], a[:, 1])
+        de = t[:, 2] - np.interp(t[:, 0], a[:, 0], a[:, 2])
+        return float(np.sqrt(np.mean(dn ** 2 + de ** 2)))
+
+    return rms_from(ref), rms_from(ekf)
 
 
 def fly(vehicle: str, path: str | None, controller: str, output: str, duration_s: float, speedup: float,
@@ -102,10 +109,11 @@ def fly(vehicle: str, path: str | None, controller: str, output: str, duration_s
             return {"exit_reason": f"no summary (exit {p.returncode}): {tail}", "wall_s": time.monotonic() - t0}
         m = s.get("metrics") or {}
         lift = liftoff_delay_s(log) if log.exists() else None
-        truth = true_rms_xy_m(log) if log.exists() and vehicle == "px4" else None
+        truth = (true_rms_xy_m(log) if log.exists() and vehicle == "px4" else None) or (None, None)
         return {"exit_reason": s["exit_reason"], "wall_s": time.monotonic() - t0, "rms_m": m.get("rms_error_m"),
                 "J_e": m.get("J_e"), "J_u_hover": m.get("J_u_hover"), "steady_m": m.get("steady_state_error_m"),
-                "overshoot_m": m.get("overshoot_m"), "liftoff_s": lift, "true_rms_xy_m": truth}
+                "overshoot_m": m.get("overshoot_m"), "liftoff_s": lift, "true_rms_xy_m": truth[0],
+                "ekf_vs_true_xy_m": truth[1]}
 
 
 def _fmt(v, spec: str) -> str:
@@ -132,7 +140,8 @@ def main(argv=None) -> int:
     outputs = ("attitude",) if args.quick else ("attitude", "rates")
     rows, results = [], []
     header = f"{'controller':10} {'output':8} {'vehicle':10} {'RMS [m]':>8} {'J_e':>7} {'J_u_hover':>9} " \
-             f"{'alt steady [m]':>14} {'overshoot':>9} {'liftoff [s]':>11} {'RMS true xy':>11} {'wall [s]':>8}  exit"
+             f"{'alt steady [m]':>14} {'overshoot':>9} {'liftoff [s]':>11} {'RMS true xy':>11} " \
+             f"{'EKF vs true':>11} {'wall [s]':>8}  exit"
     lines = [header]
     for controller in controllers:
         for output in outputs:
@@ -154,6 +163,7 @@ def main(argv=None) -> int:
                              f"{_fmt(r.get('J_e'), '7.1f')} {_fmt(r.get('J_u_hover'), '9.0f')} "
                              f"{_fmt(r.get('steady_m'), '14.4f')} {_fmt(r.get('overshoot_m'), '9.3f')} "
                              f"{_fmt(r.get('liftoff_s'), '11.2f')} {_fmt(r.get('true_rms_xy_m'), '11.3f')} "
+                             f"{_fmt(r.get('ekf_vs_true_xy_m'), '11.3f')} "
                              f"{r['wall_s']:8.1f}  {r['exit_reason']}")
                 print(lines[-1], file=sys.stderr, flush=True)
                 base = next((b for b in results if b["vehicle"] == "builtin" and b["controller"] == controller

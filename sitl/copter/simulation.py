@@ -20,10 +20,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from quadrotor.frames import Kinematics
 from quadrotor.wind import Wind, WindParams
+from sitl.copter import rigid_body
 from sitl.copter.ardupilot_emulation import EMULATIONS
 from sitl.copter.ardupilot_emulation.autopilot import ArduCopterAutopilot
 from sitl.copter.ardupilot_emulation.ekf import EkfHeight
+from sitl.copter.ardupilot_emulation.ground import SmoothedSensors, sticky_ground_step
 from sitl.copter.ardupilot_emulation.status import EKF_READY_S
 from sitl.copter.ardupilot_emulation.vehicle import emulation_params
 from sitl.copter.autopilot import Autopilot
@@ -107,7 +110,9 @@ class Simulation:
         self.params = ParamStore(specs, params)
         wind_model = Wind(wind, np.random.default_rng([seed, 1])) if wind is not None else None
         self.initial = initial or InitialConditions()
-        self.world = World(vehicle, wind_model, self.initial.state(), max_substep_s)
+        # With the emulation, the ground holds the vehicle as ArduPilot's SITL does (ardupilot_emulation.ground).
+        self.world = World(vehicle, wind_model, self.initial.state(), max_substep_s,
+                           sticky_ground_step if emulate else rigid_body.step)
         self.sensors = NedSensors(vehicle.sensors, np.random.default_rng([seed, 2]))
         if emulate:
             ready = EKF_READY_S if ekf_ready_s is None else ekf_ready_s
@@ -123,9 +128,11 @@ class Simulation:
         self.time_ns = 0
         k = self.world.kinematics
         self.imu = self.sensors.imu(k)
-        # With the emulation, the height estimate is the firmware EKF's: late and offset.
+        # With the emulation, the sensors read ArduPilot SITL's smoothed state, and the height estimate
+        # is the firmware EKF's: late and offset.
+        self._smoothed = SmoothedSensors(k) if emulate else None
         self._height = EkfHeight(k.d) if emulate else None
-        self.nav = self._estimate(self.sensors.nav(k), k.d, 0.0)
+        self.nav = self._estimate(k, 0.0)
         self.autopilot.observe(self.imu, self.nav, self.world.battery)
 
     @property
@@ -140,7 +147,11 @@ class Simulation:
         self.time_ns += self.tick_ns
         k = self.world.kinematics
         self.imu = self.sensors.imu(k)
-        self.nav = self._estimate(self.sensors.nav(k), k.d, self.dt_s)
+        self.nav = self._estimate(k, self.dt_s)
 
-    def _estimate(self, nav: NavReading, true_d_m: float, dt_s: float) -> NavReading:
-        return nav if self._height is None else self._height.apply(nav, true_d_m, dt_s)
+    def _estimate(self, k: Kinematics, dt_s: float) -> NavReading:
+        """What the position sensors read of the true state ``k`` (NED), ``dt_s`` after the last reading."""
+        if self._smoothed is not None:
+            k = self._smoothed.apply(k, dt_s)
+        nav = self.sensors.nav(k)
+        return nav if self._height is None else self._height.apply(nav, k.d, dt_s)

@@ -37,12 +37,18 @@ class RigidBodyPlant:
     initial : RigidBodyState
     max_substep_s : float
         Largest physics step; a call of :meth:`step` is split evenly.
+    step_fn : callable
+        The physics step, :func:`sitl.copter.rigid_body.step` or one of its signature with another
+        ground contact (the ArduCopter emulation's:
+        :func:`sitl.copter.ardupilot_emulation.ground.sticky_ground_step`).
     """
 
-    def __init__(self, vehicle: VehicleParams, initial: RigidBodyState, max_substep_s: float = 0.001) -> None:
+    def __init__(self, vehicle: VehicleParams, initial: RigidBodyState, max_substep_s: float = 0.001,
+                 step_fn=rigid_body.step) -> None:
         self.model = RigidBodyModel(vehicle)
         self.state = initial
         self.max_substep_s = max_substep_s
+        self.step_fn = step_fn
         self._split = (-1.0, 1, 0.0)
 
     def step(self, rotor_cmd_n: Sequence[float], dt: float, wind_ned: Sequence[float] = _CALM) -> None:
@@ -53,7 +59,7 @@ class RigidBodyPlant:
             h = dt / n
             self._split = (dt, n, h)
         s = self.state
-        f = rigid_body.step
+        f = self.step_fn
         m = self.model
         for _ in range(n):
             s = f(s, rotor_cmd_n, h, m, wind_ned)
@@ -127,11 +133,13 @@ class ReducedPlant:
         return self.state.z <= 0.0 and self.state.vz <= 0.0
 
 
-def make_plant(vehicle: VehicleParams, initial: RigidBodyState, max_substep_s: float = 0.001):
-    """The plant selected by ``vehicle.model``."""
+def make_plant(vehicle: VehicleParams, initial: RigidBodyState, max_substep_s: float = 0.001,
+               step_fn=rigid_body.step):
+    """The plant selected by ``vehicle.model``; ``step_fn`` is the 6-DOF plant's physics step (the
+    reduced plant keeps its own ground contact)."""
     if vehicle.model == "reduced":
         return ReducedPlant(vehicle, initial, max_substep_s)
-    return RigidBodyPlant(vehicle, initial, max_substep_s)
+    return RigidBodyPlant(vehicle, initial, max_substep_s, step_fn)
 
 
 class World:
@@ -146,12 +154,14 @@ class World:
         Initial state (default: at rest on the ground at home).
     max_substep_s : float
         Largest physics step.
+    step_fn : callable
+        The 6-DOF plant's physics step (see :class:`RigidBodyPlant`).
     """
 
     def __init__(self, vehicle: VehicleParams, wind: Wind | None = None, initial: RigidBodyState | None = None,
-                 max_substep_s: float = 0.001) -> None:
+                 max_substep_s: float = 0.001, step_fn=rigid_body.step) -> None:
         self.vehicle = vehicle
-        self.plant = make_plant(vehicle, initial or RigidBodyState(), max_substep_s)
+        self.plant = make_plant(vehicle, initial or RigidBodyState(), max_substep_s, step_fn)
         self.wind = wind
         self.wind_ned: tuple[float, float, float] = _CALM
         self.battery = batt.initial_battery(vehicle.battery)

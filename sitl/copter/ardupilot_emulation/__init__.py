@@ -11,6 +11,7 @@ SITL's airframe.  ``benchmarks/bench_fidelity.py`` measures how well it does (do
 ``attitude``       AC_AttitudeControl(_Multi): input_quaternion, input_rate_bf, angle and rate loops
 ``motors``         AP_MotorsMulticopter/Matrix: spool states, arming delay, mixer, thrust curve
 ``ekf``            the EKF's height estimate: 0.1 s late, 6 mm low
+``ground``         ArduPilot SITL's sticky ground contact and smoothed sensors (the liftoff)
 ``status``         EKF readiness, PreArm texts, HEARTBEAT base_mode/system_status, AUTOPILOT_VERSION
 ``vehicle``        ArduPilot SITL's X quad and the firmware SITL's parameter defaults
 ``autopilot``      :class:`ArduCopterAutopilot`, the built-in autopilot with these pieces
