@@ -39,7 +39,9 @@ def test_gcs_sigkill_vehicle_lands_itself(fly):
 
 
 def test_sitl_sigstop_2s_then_sigcont(fly):
-    spec = Spec(lockstep=True, duration_s=10.0, timeout_s=60.0,
+    # Lockstep flies as fast as it computes (~20x real time here): a 60 s mission keeps the vehicle in
+    # the air for the 0.8 + 2 wall seconds (a 10 s one had landed before the SIGSTOP on a fast machine).
+    spec = Spec(lockstep=True, duration_s=60.0, timeout_s=60.0,
                 action=signal_after_armed("sitl", signal.SIGSTOP, 0.8, cont_after_s=2.0))
     o, verdict = fly(spec)
     assert any("SIGCONT" in n for n in o.notes), f"the signals were not sent: {o.notes}"
@@ -49,7 +51,7 @@ def test_sitl_sigstop_2s_then_sigcont(fly):
 def test_sitl_sigkill_gcs_exits_lost_link(fly, tmp_path):
     land_timeout = 6.0
     config = flight_config(tmp_path, land_timeout_s=land_timeout)
-    spec = Spec(lockstep=True, duration_s=20.0, config=config, timeout_s=60.0,
+    spec = Spec(lockstep=True, duration_s=60.0, config=config, timeout_s=60.0,  # in the air at the kill (above)
                 action=signal_after_armed("sitl", signal.SIGKILL, 0.8))
     o, verdict = fly(spec, allowed={3})
     assert o.sitl_killed, f"sitl was not killed: {o.notes}"
