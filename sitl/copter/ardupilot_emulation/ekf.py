@@ -1,14 +1,15 @@
 """The emulated EKF's height estimate: late and a few millimetres low, as ArduCopter's EKF3 is.
 
 Measured on the firmware's SITL (4.8.0-dev at 64a9c787, ``gcs fly --sitl arducopter``, its dataflash
-log: ``SIM.Alt`` the simulator's truth beside ``XKF1.PD`` the EKF's down position, 10 Hz): on the
-ground the estimate sits 6 mm below the truth; after liftoff it follows the truth about 0.1 s late
+log: ``SIM.Alt`` beside ``XKF1.PD`` the EKF's down position, 10 Hz).  ``SIM.Alt`` was taken for the
+truth; it is the simulator's smoothed altitude, what its sensors read (:mod:`.ground`), so the lag is
+applied to that, after :class:`~sitl.copter.ardupilot_emulation.ground.SmoothedSensors`.  On the
+ground the estimate sits 6 mm below it; after liftoff it follows it about 0.1 s late
 (0.012-0.024 m behind at a 0.18 m/s climb) while its vertical velocity is not late.  So the estimate
-is emulated as a first-order lag of the true down position (time constant :data:`HEIGHT_LAG_S`) plus
+is emulated as a first-order lag of the sensed down position (time constant :data:`HEIGHT_LAG_S`) plus
 :data:`GROUND_OFFSET_M` plus the sensor model's noise (the lag delays the motion, it does not filter
-the noise: filtering it too took a fifth off the flight's J_u_hover), the velocity left as measured.
-This is what makes the firmware's liftoff, judged on the estimate (5 cm above the start), come
-~0.12 s after the truth's (docs/FIDELITY.md).
+the noise: filtering it too took a fifth off the flight's J_u_hover), the velocity left as measured
+(docs/FIDELITY.md).
 """
 
 from __future__ import annotations
