@@ -214,10 +214,28 @@ def test_a_gap_in_our_setpoints_beyond_px4s_loss_time_is_control_lost():
 def test_the_drag_of_a_vehicle_px4_simulates_itself_comes_from_sih():
     base = {"COM_OBL_RC_ACT": 4, "COM_OF_LOSS_T": 0.5, "COM_DISARM_LAND": 2.0, "MPC_THR_HOVER": 0.5}
     assert Px4Profile().configure(_Params(base), None).drag_1_s is None  # a real vehicle: the config's
-    sih = _Params(dict(base, SIH_KDV=1.0, SIH_MASS=2.0))
+    sitl = dict(base, SENS_EN_GPSSIM=1, SYS_HITL=0)  # PX4 SITL's sihsim airframes
+    sih = _Params(dict(sitl, SIH_KDV=1.0, SIH_MASS=2.0))
     assert Px4Profile().configure(sih, None).drag_1_s == pytest.approx(0.5)
     assert any("SIH_KDV" in t for t in sih.said_lines)
-    assert Px4Profile().configure(_Params(dict(base, SIH_KDV=1.0, SIH_MASS=0.0)), None).drag_1_s is None
+    assert Px4Profile().configure(_Params(dict(sitl, SIH_KDV=1.0, SIH_MASS=0.0)), None).drag_1_s is None
+
+
+@pytest.mark.parametrize(("extra", "simulated"), [
+    ({"SENS_EN_GPSSIM": 1, "SYS_HITL": 0}, True),   # SITL with SIH
+    ({"SENS_EN_GPSSIM": 0, "SYS_HITL": 2}, True),   # SIH on a flight controller
+    ({"SYS_HITL": 2}, True),                        # ... whose firmware has no simulated-GPS parameter
+    ({"SENS_EN_GPSSIM": 0, "SYS_HITL": 0}, False),  # a real Pixhawk with the SIH module built in
+    ({"SYS_HITL": 1}, False),                       # HITL with an external simulator: SIH does not run
+])
+def test_only_a_running_sih_counts_as_px4_simulating_its_vehicle(extra, simulated):
+    base = {"COM_OBL_RC_ACT": 4, "COM_OF_LOSS_T": 0.5, "COM_DISARM_LAND": 2.0, "MPC_THR_HOVER": 0.5,
+            "SIH_KDV": 1.0, "SIH_MASS": 1.0}
+    params = _Params(dict(base, **extra))
+    assert Px4Profile.simulates_itself(params) is simulated
+    out = Px4Profile().configure(params, None)
+    assert (out.drag_1_s is not None) is simulated
+    assert (out.horizontal_velocity_std_m_s is not None) is simulated
 
 
 def test_where_sih_simulates_the_vehicle_its_horizontal_velocity_is_taken_from_the_positions():
@@ -226,7 +244,7 @@ def test_where_sih_simulates_the_vehicle_its_horizontal_velocity_is_taken_from_t
     real = Px4Profile().configure(_Params(base), None)
     assert real.horizontal_velocity_std_m_s is None
     assert velocity_var_m2_s2(config_var, real) == config_var  # a real vehicle: fused as the config says
-    sih = _Params(dict(base, SIH_KDV=1.0, SIH_MASS=1.0))
+    sih = _Params(dict(base, SIH_KDV=1.0, SIH_MASS=1.0, SENS_EN_GPSSIM=1))
     out = Px4Profile().configure(sih, None)
     assert out.horizontal_velocity_std_m_s == Px4Profile.SIH_HORIZONTAL_VELOCITY_STD_M_S
     north, east, down = velocity_var_m2_s2(config_var, out)

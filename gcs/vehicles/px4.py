@@ -20,8 +20,10 @@ is sent to the other):
   and read for the output adapters: MPC_THR_HOVER (the thrust that holds the vehicle),
   MC_ROLL_P/MC_PITCH_P/MC_YAW_P (the angle loop is linear: ``omega = P e``, no square-root
   limit), MC_ROLLRATE_MAX/MC_PITCHRATE_MAX/MC_YAWRATE_MAX (rate limits, deg/s), and where PX4
-  simulates the vehicle itself (SIH) its drag SIH_KDV / SIH_MASS for the disturbance observer;
-* where PX4 simulates the vehicle itself (SIH), its horizontal velocity estimate is not fused
+  simulates the vehicle itself (SIH running, not merely built in) its drag SIH_KDV / SIH_MASS for the
+  disturbance observer;
+* where PX4 simulates the vehicle itself (SIH running: :meth:`Px4Profile.simulates_itself`), its
+  horizontal velocity estimate is not fused
   (:data:`SIH_HORIZONTAL_VELOCITY_STD_M_S`): with SIH's sensor noise (accelerometer 0.5/1.7/1.4
   m/s^2, GPS 0.2 m) EKF2's LOCAL_POSITION_NED velocity lags its own position by about 1 s on the
   circle (measured: 0.10 m/s of radial velocity on a 0.31 m/s circle, and 0.2-0.3 m/s RMS from SIH's
@@ -138,16 +140,28 @@ class Px4Profile:
                                                                           ("YAW", 200.0)))
         if min(rate_max) < 0:
             raise PreflightRefused(f"MC_ROLLRATE_MAX/MC_PITCHRATE_MAX/MC_YAWRATE_MAX = {rate_max}: negative limits")
+        simulated = self.simulates_itself(params)
         out = OutputParams(hover, gains, (0.0, 0.0, 0.0), tuple(r * _DEG for r in rate_max),  # type: ignore[arg-type]
-                           drag_1_s=self.simulated_drag(params),
-                           horizontal_velocity_std_m_s=self.simulated_velocity_std(params))
+                           drag_1_s=self.simulated_drag(params) if simulated else None,
+                           horizontal_velocity_std_m_s=self.SIH_HORIZONTAL_VELOCITY_STD_M_S if simulated else None)
+        if simulated:
+            params.said("horizontal velocity from the positions (SIH: EKF2's velocity lags its position)")
         return out if output is None else self.configure_output(params, output, firmware, out)
 
     @staticmethod
+    def simulates_itself(params) -> bool:
+        """Whether PX4 simulates the vehicle it flies (SIH): the simulator's parameters exist (SIH_MASS)
+        *and* it runs, on a flight controller (SYS_HITL = 2) or in SITL (the simulated GPS,
+        SENS_EN_GPSSIM = 1, as PX4's sihsim airframes set it).  A Pixhawk whose firmware merely has
+        the SIH module built in (SIH_MASS exists, SYS_HITL 0, no simulated GPS) is a real vehicle."""
+        if optional_param(params, "SIH_MASS") is None:
+            return False
+        return optional_param(params, "SYS_HITL") == 2 or optional_param(params, "SENS_EN_GPSSIM") == 1
+
+    @staticmethod
     def simulated_drag(params) -> float | None:
-        """SIH_KDV / SIH_MASS [1/s] where PX4 simulates its own vehicle (SITL with SIH, or SIH on a
-        flight controller): that vehicle's linear drag per unit mass, the disturbance observer's drag
-        model.  None on a real vehicle (no SIH parameters) or implausible values."""
+        """SIH_KDV / SIH_MASS [1/s] of a vehicle PX4 simulates (:meth:`simulates_itself`): its linear
+        drag per unit mass, the disturbance observer's drag model.  None for implausible values."""
         kdv = optional_param(params, "SIH_KDV")
         mass = optional_param(params, "SIH_MASS") if kdv is not None else None
         if kdv is None or mass is None or not (0.0 <= kdv <= 100.0 and 0.01 <= mass <= 1000.0):
@@ -155,14 +169,6 @@ class Px4Profile:
         drag = kdv / mass
         params.said(f"drag {drag:.3g} 1/s from SIH_KDV / SIH_MASS (PX4 simulates this vehicle)")
         return drag
-
-    def simulated_velocity_std(self, params) -> float | None:
-        """:data:`SIH_HORIZONTAL_VELOCITY_STD_M_S` where PX4 simulates its own vehicle (SIH_MASS
-        exists), else None (a real vehicle's velocity estimate is fused as the config says)."""
-        if optional_param(params, "SIH_MASS") is None:
-            return None
-        params.said("horizontal velocity from the positions (SIH: EKF2's velocity lags its position)")
-        return self.SIH_HORIZONTAL_VELOCITY_STD_M_S
 
     def configure_output(self, params, output: str, firmware, out: OutputParams) -> OutputParams:
         """What ``output`` needs: PX4 needs no parameter per output; ``actuator`` refused where not taken."""
