@@ -25,7 +25,7 @@ from quadrotor.wind import Wind, WindParams
 from sitl.copter import rigid_body
 from sitl.copter.ardupilot_emulation import EMULATIONS
 from sitl.copter.ardupilot_emulation.autopilot import ArduCopterAutopilot
-from sitl.copter.ardupilot_emulation.ekf import EkfHeight
+from sitl.copter.ardupilot_emulation.ekf import RATE_OFFSET_RAD_S, EkfHeight, EkfHorizontal, EkfTilt
 from sitl.copter.ardupilot_emulation.ground import SmoothedSensors, sticky_ground_step
 from sitl.copter.ardupilot_emulation.status import EKF_READY_S
 from sitl.copter.ardupilot_emulation.vehicle import emulation_params
@@ -34,7 +34,7 @@ from sitl.copter.mission_store import Home, MissionStore
 from sitl.copter.navigation import Navigator
 from sitl.copter.params import ParamStore, ardupilot_params
 from sitl.copter.rigid_body import RigidBodyState, initial_state
-from sitl.copter.sensors import NavReading, NedSensors
+from sitl.copter.sensors import ImuReading, NavReading, NedSensors
 from sitl.copter.vehicle import VehicleParams
 from sitl.copter.world import World
 
@@ -127,11 +127,15 @@ class Simulation:
                                              (h.lat_deg, h.lon_deg, h.alt_m), self.home, self.autopilot.say)
         self.time_ns = 0
         k = self.world.kinematics
-        self.imu = self.sensors.imu(k)
-        # With the emulation, the sensors read ArduPilot SITL's smoothed state, and the height estimate
-        # is the firmware EKF's: late and offset.
+        # With the emulation, the sensors read ArduPilot SITL's smoothed state, and the estimate is the
+        # firmware EKF's: the height late and offset, the attitude tilted, the horizontal state pulled off
+        # by the tilt (ardupilot_emulation.ekf).
         self._smoothed = SmoothedSensors(k) if emulate else None
         self._height = EkfHeight(k.d) if emulate else None
+        self._tilt = EkfTilt() if emulate else None
+        self._horizontal = EkfHorizontal(vehicle.gravity_m_s2) if emulate else None
+        self._armed_ns: int | None = None
+        self.imu = self._attitude(k)
         self.nav = self._estimate(k, 0.0)
         self.autopilot.observe(self.imu, self.nav, self.world.battery)
 
@@ -146,12 +150,30 @@ class Simulation:
         self.world.step(cmd, self.dt_s)
         self.time_ns += self.tick_ns
         k = self.world.kinematics
-        self.imu = self.sensors.imu(k)
+        self.imu = self._attitude(k)
         self.nav = self._estimate(k, self.dt_s)
+
+    def _tilt_error(self) -> tuple[float, float]:
+        """The emulated EKF's tilt error now (time since the first arming)."""
+        if self._armed_ns is None and self.autopilot.armed:
+            self._armed_ns = self.time_ns
+        return self._tilt.error_rad(None if self._armed_ns is None else (self.time_ns - self._armed_ns) * 1e-9)
+
+    def _attitude(self, k: Kinematics) -> ImuReading:
+        """What the attitude sensors (the AHRS) read of the true state ``k``."""
+        imu = self.sensors.imu(k)
+        if self._tilt is None:
+            return imu
+        return self._tilt.apply(imu, self._tilt_error(), RATE_OFFSET_RAD_S)
 
     def _estimate(self, k: Kinematics, dt_s: float) -> NavReading:
         """What the position sensors read of the true state ``k`` (NED), ``dt_s`` after the last reading."""
         if self._smoothed is not None:
             k = self._smoothed.apply(k, dt_s)
         nav = self.sensors.nav(k)
-        return nav if self._height is None else self._height.apply(nav, k.d, dt_s)
+        if self._height is None:
+            return nav
+        if self._horizontal is not None:
+            self._horizontal.advance(self._tilt_error(), dt_s, self._armed_ns is not None)
+            nav = self._horizontal.apply(nav)
+        return self._height.apply(nav, k.d, dt_s)

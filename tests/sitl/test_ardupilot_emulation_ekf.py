@@ -65,3 +65,100 @@ def test_the_emulated_simulation_reports_the_offset_estimate_from_boot():
         errors.append(emulated.nav.d - emulated.world.kinematics.d)
     sigma = emulated.sensors.params.position_noise_std_m / math.sqrt(n)
     assert sum(errors) / n == pytest.approx(GROUND_OFFSET_M, abs=4 * sigma)
+
+
+# ---------------------------------------------------------------- tilt and horizontal estimate
+
+from sitl.copter.ardupilot_emulation.ekf import (POSITION_GAIN_1_S, RATE_OFFSET_RAD_S, TILT_PROFILE,  # noqa: E402
+                                                 VELOCITY_GAIN_1_S, EkfHorizontal, EkfTilt)
+from sitl.copter.sensors import ImuReading  # noqa: E402
+from quadrotor.frames import euler_to_quaternion  # noqa: E402
+
+
+def _imu(roll: float, pitch: float, yaw: float) -> ImuReading:
+    return ImuReading(roll, pitch, yaw, 0.01, 0.02, 0.03, *euler_to_quaternion(roll, pitch, yaw))
+
+
+def test_at_the_measured_heading_the_reported_angles_exceed_the_true_ones_by_the_profile():
+    tilt = EkfTilt()
+    heading = math.radians(-4.8)
+    for t, roll_deg, pitch_deg in (TILT_PROFILE[0], TILT_PROFILE[4], TILT_PROFILE[-1]):
+        out = EkfTilt.apply(_imu(0.01, -0.02, heading), tilt.error_rad(t))
+        assert math.degrees(out.roll - 0.01) == pytest.approx(roll_deg, abs=2e-3)
+        assert math.degrees(out.pitch + 0.02) == pytest.approx(pitch_deg, abs=2e-3)
+        assert out.yaw == pytest.approx(heading, abs=1e-4)
+        assert (out.p, out.q, out.r) == (0.01, 0.02, 0.03)  # no rate offset asked for
+
+
+def test_the_rate_offset_is_added_to_the_body_rates_only():
+    out = EkfTilt.apply(_imu(0.0, 0.0, 0.0), (0.0, 0.0), (0.001, -0.002, 0.003))
+    assert (out.p, out.q, out.r) == pytest.approx((0.011, 0.018, 0.033))
+    assert (out.roll, out.pitch, out.yaw) == pytest.approx((0.0, 0.0, 0.0))
+
+
+def test_the_tilt_error_is_fixed_in_the_earth_frame_as_the_vehicle_turns():
+    north, east = math.radians(0.1), math.radians(0.2)
+    facing_east = EkfTilt.apply(_imu(0.0, 0.0, math.pi / 2), (north, east))
+    # heading east, the body's roll axis points east: the east tilt reads as roll, the north one as -pitch
+    assert facing_east.roll == pytest.approx(east, rel=1e-3)
+    assert facing_east.pitch == pytest.approx(-north, rel=1e-3)
+
+
+def test_the_profile_is_held_before_arming_interpolated_and_held_after_its_end():
+    tilt = EkfTilt(profile=((1.0, 0.1, 0.2), (3.0, 0.3, 0.0)), yaw_deg=0.0)
+    assert tilt.error_rad(None) == pytest.approx((math.radians(0.1), math.radians(0.2)))
+    assert tilt.error_rad(2.0) == pytest.approx((math.radians(0.2), math.radians(0.1)))
+    assert tilt.error_rad(100.0) == pytest.approx((math.radians(0.3), 0.0))
+
+
+@pytest.mark.parametrize("profile", [(), ((1.0, 0.1),), ((2.0, 0.1, 0.1), (1.0, 0.1, 0.1)), ((0.0, math.nan, 0.0),)])
+def test_a_bad_profile_is_refused(profile):
+    with pytest.raises(ValueError, match="profile"):
+        EkfTilt(profile=profile)
+
+
+def test_a_steady_tilt_error_gives_the_velocity_and_position_errors_of_the_fit():
+    g, north, east = 9.81, math.radians(0.15), math.radians(0.1)
+    h = EkfHorizontal(g)
+    h.advance((north, east), 0.0025, armed=False)
+    # waiting on the ground: the velocity reading already off, the position not
+    assert h.velocity_error == pytest.approx([-g * east / VELOCITY_GAIN_1_S, g * north / VELOCITY_GAIN_1_S])
+    assert h.position_error == [0.0, 0.0]
+    for _ in range(8000):  # 20 s armed: settled
+        h.advance((north, east), 0.0025)
+    v = [-g * east / VELOCITY_GAIN_1_S, g * north / VELOCITY_GAIN_1_S]
+    assert h.velocity_error == pytest.approx(v, rel=1e-3)
+    assert h.position_error == pytest.approx([x / POSITION_GAIN_1_S for x in v], rel=1e-2)
+    out = h.apply(NavReading(1.0, 2.0, -1.5, 0.3, -0.4, 0.0, 1.5, -1.0))
+    assert (out.n, out.e) == pytest.approx((1.0 + h.position_error[0], 2.0 + h.position_error[1]))
+    assert (out.vn, out.ve) == pytest.approx((0.3 + v[0], -0.4 + v[1]), rel=1e-3)
+    assert (out.d, out.vd, out.baro_alt_m) == (-1.5, 0.0, 1.5)
+
+
+def test_the_emulated_vehicle_reports_the_tilted_attitude_and_the_pulled_velocity():
+    from sitl.copter.ardupilot_emulation.vehicle import arducopter_sitl_vehicle
+    from sitl.copter.simulation import Simulation
+
+    sim = Simulation(arducopter_sitl_vehicle(), emulate="arducopter", ekf_ready_s=0.0)
+    plain = Simulation(arducopter_sitl_vehicle(), ekf_ready_s=0.0)
+    n = 800
+    sums = [0.0] * 9
+    for _ in range(n):  # 2 s resting level on the ground, heading 0
+        sim.tick()
+        plain.tick()
+        for i, v in enumerate((sim.imu.roll, sim.imu.pitch, sim.nav.vn, sim.nav.ve, plain.imu.roll, plain.nav.vn,
+                               sim.imu.p, sim.imu.q, sim.imu.r)):
+            sums[i] += v / n
+    k = sim.world.kinematics
+    assert abs(k.qx) < 1e-9 and abs(k.qy) < 1e-9
+    # the AHRS reads the profile's first row, turned from the firmware's heading (-4.8 deg) to 0
+    north, east = EkfTilt().error_rad(None)
+    assert sums[0] == pytest.approx(north, abs=2e-4) and sums[1] == pytest.approx(east, abs=2e-4)
+    assert math.degrees(north) == pytest.approx(0.100, abs=0.002)
+    # the velocity reading off by the steady false acceleration: about -8.8 / +12.1 mm/s
+    assert sums[2] == pytest.approx(-9.81 * east / VELOCITY_GAIN_1_S, abs=1e-3)
+    assert sums[3] == pytest.approx(9.81 * north / VELOCITY_GAIN_1_S, abs=1e-3)
+    # the rates the firmware's AHRS reads at rest
+    assert sums[6:9] == pytest.approx(RATE_OFFSET_RAD_S, abs=2e-5)
+    assert math.degrees(RATE_OFFSET_RAD_S[2]) == pytest.approx(0.21)
+    assert abs(sums[4]) < 1e-4 and abs(sums[5]) < 1e-3  # the built-in SITL is unchanged
