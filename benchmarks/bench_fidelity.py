@@ -1,6 +1,6 @@
 """Does the built-in SITL predict ArduPilot's firmware?  ``sitl --emulate arducopter`` vs ArduCopter SITL (issue 13.4).
 
-Run: ``python benchmarks/bench_fidelity.py [--quick] [--json] [--svg docs/fidelity-steps.svg]`` (needs the
+Run: ``python benchmarks/bench_fidelity.py [--quick] [--repeats N] [--json] [--svg docs/fidelity-steps.svg]`` (needs the
 ArduCopter SITL binary: ``$GCS_ARDUCOPTER`` or ``../shared/arducopter``; skipped without it).
 
 The same flights (controller, output, outdoor-circle cut at 20 s, calm air) on three vehicles:
@@ -8,7 +8,9 @@ the built-in SITL as it is (real time), the built-in SITL with ``--emulate arduc
 (real time; the EKF start-up only delays the boot) and the firmware (``gcs fly --sitl arducopter
 --speedup 2``).  Per flight: RMS position error, J_e, J_u_hover, overshoot and the liftoff time (the
 first control step after the mission start with the estimated altitude above 5 cm); each emulated
-figure beside the firmware's with their ratio and whether it is within 20 %.  Flights: nlsoc with
+figure beside the firmware's with their ratio and whether it is within 20 % (with ``--repeats N``: medians
+of N flights per vehicle, and the firmware's own min-max beside, since one firmware flight's overshoot
+varies by +-15 % from the next).  Flights: nlsoc with
 the attitude output (``--quick``), and also loc/attitude and nlsoc/rates.  Then a 10 deg roll
 step (``fidelity_steps.py``) on the emulation and on the firmware (instance 6, real time): roll and
 roll rate at fixed times after the step; ``--svg`` draws both responses overlaid.
@@ -19,6 +21,7 @@ from __future__ import annotations
 import argparse
 import os
 import signal
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -113,6 +116,21 @@ def svg(steps: dict, path: str) -> None:
     fig.savefig(path, format="svg")
 
 
+def median_flight(flights: list[dict]) -> dict:
+    """Per metric the median over repeated flights (None where any is None), the exits joined, and
+    each metric's (min, max) under ``spread``."""
+    out: dict = {"exit_reason": "/".join(sorted({f["exit_reason"] for f in flights})),
+                 "wall_s": sum(f["wall_s"] for f in flights), "spread": {}}
+    for k, _ in METRICS:
+        vals = [f[k] for f in flights]
+        if any(v is None for v in vals):
+            out[k] = None
+            continue
+        out[k] = statistics.median(vals)
+        out["spread"][k] = (min(vals), max(vals))
+    return out
+
+
 def fmt(v: float | None) -> str:
     return f"{v:10.4g}" if v is not None else f"{'-':>10s}"
 
@@ -132,7 +150,12 @@ def main(argv=None) -> int:
     ap.add_argument("--json", action="store_true", help="text on stderr, one JSON document on stdout")
     ap.add_argument("--svg", metavar="PATH", help="write the step-response overlay there")
     ap.add_argument("--no-steps", action="store_true", help="flights only")
+    ap.add_argument("--repeats", type=int, default=1, metavar="N",
+                    help="fly each case N times per vehicle and compare medians (the firmware's own "
+                         "flight-to-flight spread is printed beside); default 1")
     args = ap.parse_args(argv)
+    if args.repeats < 1:
+        ap.error("--repeats must be >= 1")
     exe = locate_arducopter(ROOT.parent / "shared" / "arducopter")
     if exe is None:
         why = f"no ArduCopter SITL binary (${ENV_VAR} or ../shared/arducopter)"
@@ -143,17 +166,21 @@ def main(argv=None) -> int:
     rows, lines = [], []
     for controller, output in cases:
         key = f"{controller}/{output}"
-        res = {v: fly(controller, output, v, str(exe)) for v in ("builtin", "emulated", "firmware")}
+        res = {v: median_flight([fly(controller, output, v, str(exe)) for _ in range(args.repeats)])
+               for v in ("builtin", "emulated", "firmware")}
         data["flights"][key] = res
         lines.append(f"{key}: exits built-in {res['builtin']['exit_reason']}, emulated "
                      f"{res['emulated']['exit_reason']}, firmware {res['firmware']['exit_reason']}")
+        many = args.repeats > 1
         lines.append(f"  {'metric':15s} {'built-in':>10s} {'emulated':>10s} {'firmware':>10s} {'emu/fw':>7s}"
-                     "  within 20 %")
+                     "  within 20 %" + (f"   (medians of {args.repeats}; firmware min-max)" if many else ""))
         for k, label in METRICS:
             e, f, b = res["emulated"][k], res["firmware"][k], res["builtin"][k]
             ratio, ok = verdict(e, f)
+            spread = res["firmware"]["spread"].get(k) if many else None
             lines.append(f"  {label:15s} {fmt(b)} {fmt(e)} {fmt(f)} {ratio if ratio is not None else float('nan'):7.2f}"
-                         f"  {'yes' if ok else 'NO' if ok is not None else '-'}")
+                         f"  {'yes' if ok else 'NO' if ok is not None else '-':3s}"
+                         + (f"          {spread[0]:.4g}-{spread[1]:.4g}" if spread else ""))
             rows.append(row(f"{key} {label}: emulated", e, baseline="firmware", baseline_value=f,
                             target="within 20 % of the firmware", met=ok))
     if not args.no_steps:
