@@ -159,3 +159,49 @@ def test_actuator_targets_are_ignored_as_on_arducopter():
     ap = sim.autopilot
     ap.set_mode(GUIDED_NOGPS, sim.time_ns)
     assert not ap.set_actuator_controls([0.0, 0.0, 0.0, 0.5], sim.time_ns)[0]
+
+
+def test_on_the_ground_the_target_is_level_in_the_estimate_frame_and_the_integrators_relax():
+    """make_safe_ground_handling: a level target (not the estimated attitude), integrators towards 0."""
+    from quadrotor.frames import quaternion_to_euler
+
+    sim = make_sim()
+    ap = sim.autopilot
+    run_until(sim, 1.1)
+    ap.set_mode(GUIDED_NOGPS, sim.time_ns)
+    ap.arm(sim.time_ns)
+    for pid in ap.att.pids:
+        pid.integrator = 0.01
+    run_until(sim, sim.time_s + 1.0, euler_to_quaternion(0.0, 0.0, sim.imu.yaw), 0.0)  # landed, zero thrust
+    roll_t, pitch_t, yaw_t = quaternion_to_euler(ap.att.attitude_target)
+    assert abs(roll_t) < 1e-9 and abs(pitch_t) < 1e-9
+    assert yaw_t == pytest.approx(sim.imu.yaw, abs=1e-6)  # the heading target follows the body at idle
+    assert sim.imu.roll > math.radians(0.05)  # while the estimate reads the firmware's tilt error
+    # relaxed with 0.5 s: e^-2 of 0.01 after 1 s
+    assert all(abs(pid.integrator) < 0.01 * math.exp(-1.9) for pid in ap.att.pids)
+
+
+def test_spooling_up_on_the_ground_flies_a_level_target_then_the_pinned_vehicle_winds_the_rate_loop():
+    """zero_throttle_and_relax_ac: with positive thrust the target stays level until the motors run
+    unlimited; then, still held by the ground, a level command against the tilted estimate winds the
+    roll integrator (on the firmware the vehicle rolls when the ground lets go)."""
+    from quadrotor.frames import quaternion_to_euler
+
+    sim = make_sim()
+    ap = sim.autopilot
+    run_until(sim, 1.1)
+    ap.set_mode(GUIDED_NOGPS, sim.time_ns)
+    ap.arm(sim.time_ns)
+    q = euler_to_quaternion(0.0, 0.0, sim.imu.yaw)
+    run_until(sim, sim.time_s + ARMING_DELAY_S + 0.1, q, 0.5)
+    assert ap.land_complete and ap.motors.spool in (SpoolState.GROUND_IDLE, SpoolState.SPOOLING_UP)
+    roll_t, pitch_t, _ = quaternion_to_euler(ap.att.attitude_target)
+    assert abs(roll_t) < 1e-9 and abs(pitch_t) < 1e-9
+    assert ap.att.rate_demand[0] < 0.0  # levelling the estimated roll (+0.1 deg)
+    t_end = sim.time_s + 2.0
+    while ap.land_complete and sim.time_s < t_end:
+        run_until(sim, sim.time_s + 0.0025, q, 0.5)
+    assert not ap.land_complete and sim.world.kinematics.d == 0.0  # unlimited, still pinned
+    run_until(sim, sim.time_s + 0.1, q, 0.5)
+    assert sim.world.kinematics.d == 0.0
+    assert ap.att.pids[0].integrator < 0.0

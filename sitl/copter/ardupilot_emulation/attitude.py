@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from quadrotor.frames import quat_conjugate, quat_multiply, quat_rotate
+from quadrotor.frames import euler_to_quaternion, quat_conjugate, quat_multiply, quat_rotate, quaternion_to_euler
 from sitl.copter.ardupilot_emulation.filters import LowPass2p, RatePid
 from sitl.copter.ardupilot_emulation.shaping import attitude_command_model, sqrt_controller
 
@@ -33,6 +33,7 @@ _THRUST_ERROR_ANGLE = math.radians(30.0)    # AC_ATTITUDE_THRUST_ERROR_ANGLE_RAD
 _RP_ACCEL_MIN, _RP_ACCEL_MAX = math.radians(40.0), math.radians(720.0)   # controller accel bounds, rad/s/s
 _Y_ACCEL_MIN, _Y_ACCEL_MAX = math.radians(10.0), math.radians(120.0)
 _YAW_MAX_ERROR = math.radians(45.0)
+RATE_RELAX_TC_S = 0.5                      # AC_ATTITUDE_RATE_RELAX_TC
 
 
 def from_axis_angle(v: Sequence[float]) -> Quat:
@@ -105,6 +106,24 @@ class AttitudeControl:
         self.attitude_target = tuple(q_body)  # type: ignore[assignment]
         self.ang_vel_target = [0.0, 0.0, 0.0]
         self.ang_accel_target = [0.0, 0.0, 0.0]
+
+    def reset_yaw_target(self, q_body: Sequence[float]) -> None:
+        """The target's heading = the body's, no yaw rate (``reset_yaw_target_and_rate``)."""
+        roll, pitch, _ = quaternion_to_euler(self.attitude_target)
+        self.attitude_target = euler_to_quaternion(roll, pitch, quaternion_to_euler(q_body)[2])
+        self.ang_vel_target[2] = 0.0
+        self.ang_accel_target[2] = 0.0
+
+    def input_level(self, q_body: Sequence[float]) -> None:
+        """Level roll and pitch at the target's heading, no yaw rate: what ArduCopter flies on the ground
+        and while it spools up (``input_euler_angle_roll_pitch_euler_rate_yaw_rad(0, 0, 0)``)."""
+        level = euler_to_quaternion(0.0, 0.0, quaternion_to_euler(self.attitude_target)[2])
+        self.input_quaternion(level, (0.0, 0.0, 0.0), q_body)
+
+    def relax_rate_i(self) -> None:
+        """The rate integrators towards 0 in :data:`RATE_RELAX_TC_S` (``reset_rate_controller_I_terms_smoothly``)."""
+        for pid in self.pids:
+            pid.relax_i(self.dt, RATE_RELAX_TC_S)
 
     def reset_rate_i(self) -> None:
         """Zero the rate integrators (on the ground, ``reset_rate_controller_I_terms``)."""

@@ -137,14 +137,16 @@ class ArduCopterAutopilot(Autopilot):
         return self.motors.output(self._now_s, roll, pitch, yaw, throttle, avg_max)
 
     def _ground_idle(self) -> tuple[float, float, float, float]:
+        """``make_safe_ground_handling``: ground idle, the rate integrators relaxed towards 0 (0.5 s), the
+        heading target reset while idle, a level target; the loops run on the estimated attitude."""
         self._reset_loops()
-        self.att.reset_rate_i()
-        self.att.reset_target(self._q_body())
+        q = self._q_body()
+        self.att.relax_rate_i()
+        if self.motors.spool in (SpoolState.SHUT_DOWN, SpoolState.GROUND_IDLE):
+            self.att.reset_yaw_target(q)
+        self.att.input_level(q)
         self.motors.desired = SpoolState.GROUND_IDLE
-        self.throttle = 0.0
-        self.att_target_q = self._level_q()
-        self.rate_target = (0.0, 0.0, 0.0)
-        return self.motors.output(self._now_s, 0.0, 0.0, 0.0, 0.0, 0.0)
+        return self._output(0.0)
 
     def _fly(self, q_target, rate_ff, rates_only: bool, throttle: float, boost: bool, dt: float,
              imu: ImuReading) -> tuple[float, float, float, float]:
@@ -172,9 +174,10 @@ class ArduCopterAutopilot(Autopilot):
         if self.land_complete:
             if value <= 0.0:
                 return self._ground_idle()
-            # take-off: zero throttle, relaxed controllers, until the motors run unlimited
-            self.att.reset_rate_i()
-            self.att.reset_target(self._q_body())
+            # take-off (zero_throttle_and_relax_ac): zero throttle and a level target, the rate loop running
+            # (integrators too) until the motors run unlimited; a pinned vehicle whose estimated attitude
+            # is not level winds them up, and rolls when the ground lets go (docs/FIDELITY.md)
+            self.att.input_level(self._q_body())
             self.motors.desired = SpoolState.THROTTLE_UNLIMITED
             cmd = self._output(0.0)
             if self.motors.spool == SpoolState.THROTTLE_UNLIMITED:

@@ -91,6 +91,10 @@ class RatePid:
         """Zero the integrator."""
         self.integrator = 0.0
 
+    def relax_i(self, dt: float, time_constant_s: float) -> None:
+        """Move the integrator towards 0 with ``time_constant_s`` (``AC_PID::relax_integrator(0, dt, tc)``)."""
+        self.integrator -= self.integrator * (dt / (dt + time_constant_s))
+
     def update(self, target: float, measurement: float, dt: float, limit: bool) -> float:
         """Output for rate ``target`` and gyro ``measurement`` [rad/s]; ``limit``: the motors saturate (I frozen)."""
         if self._reset:
