@@ -29,6 +29,15 @@ def run_until(sim: Simulation, t_s: float, q=None, thrust: float | None = None) 
         sim.tick()
 
 
+def armed_on_ground(ekf_ready_s: float = 1.0) -> Simulation:
+    """A simulation armed in GUIDED_NOGPS on the ground, 1.1 s after boot."""
+    sim = make_sim(ekf_ready_s)
+    run_until(sim, 1.1)
+    sim.autopilot.set_mode(GUIDED_NOGPS, sim.time_ns)
+    sim.autopilot.arm(sim.time_ns)
+    return sim
+
+
 def airborne(sim: Simulation, alt_m: float = 1.5) -> tuple[float, float, float, float]:
     """Armed in GUIDED_NOGPS and climbed to about ``alt_m``; returns the level quaternion flown."""
     ap = sim.autopilot
@@ -95,11 +104,8 @@ def test_arming_refused_with_prearm_text_until_the_ekf_is_ready():
 
 
 def test_no_thrust_during_the_arming_delay_then_spool_up_and_liftoff():
-    sim = make_sim()
+    sim = armed_on_ground()
     ap = sim.autopilot
-    run_until(sim, 1.1)
-    ap.set_mode(GUIDED_NOGPS, sim.time_ns)
-    ap.arm(sim.time_ns)
     t_arm = sim.time_s
     q = euler_to_quaternion(0.0, 0.0, sim.imu.yaw)
     run_until(sim, t_arm + ARMING_DELAY_S - 0.05, q, 0.5)
@@ -165,11 +171,8 @@ def test_on_the_ground_the_target_is_level_in_the_estimate_frame_and_the_integra
     """make_safe_ground_handling: a level target (not the estimated attitude), integrators towards 0."""
     from quadrotor.frames import quaternion_to_euler
 
-    sim = make_sim()
+    sim = armed_on_ground()
     ap = sim.autopilot
-    run_until(sim, 1.1)
-    ap.set_mode(GUIDED_NOGPS, sim.time_ns)
-    ap.arm(sim.time_ns)
     for pid in ap.att.pids:
         pid.integrator = 0.01
     run_until(sim, sim.time_s + 1.0, euler_to_quaternion(0.0, 0.0, sim.imu.yaw), 0.0)  # landed, zero thrust
@@ -187,11 +190,8 @@ def test_spooling_up_on_the_ground_flies_a_level_target_then_the_pinned_vehicle_
     roll integrator (on the firmware the vehicle rolls when the ground lets go)."""
     from quadrotor.frames import quaternion_to_euler
 
-    sim = make_sim()
+    sim = armed_on_ground()
     ap = sim.autopilot
-    run_until(sim, 1.1)
-    ap.set_mode(GUIDED_NOGPS, sim.time_ns)
-    ap.arm(sim.time_ns)
     q = euler_to_quaternion(0.0, 0.0, sim.imu.yaw)
     run_until(sim, sim.time_s + ARMING_DELAY_S + 0.1, q, 0.5)
     assert ap.land_complete and ap.motors.spool in (SpoolState.GROUND_IDLE, SpoolState.SPOOLING_UP)
