@@ -34,7 +34,7 @@ from sitl.copter.mission_store import Home, MissionStore
 from sitl.copter.navigation import Navigator
 from sitl.copter.params import ParamStore, ardupilot_params
 from sitl.copter.rigid_body import RigidBodyState, initial_state
-from sitl.copter.sensors import ImuReading, NavReading, NedSensors
+from sitl.copter.sensors import NedSensors
 from sitl.copter.vehicle import VehicleParams
 from sitl.copter.world import World
 
@@ -135,8 +135,7 @@ class Simulation:
         self._tilt = EkfTilt() if emulate else None
         self._horizontal = EkfHorizontal(vehicle.gravity_m_s2) if emulate else None
         self._armed_ns: int | None = None
-        self.imu = self._attitude(k)
-        self.nav = self._estimate(k, 0.0)
+        self._read(k, 0.0)
         self.autopilot.observe(self.imu, self.nav, self.world.battery)
 
     @property
@@ -149,31 +148,20 @@ class Simulation:
         cmd = self.autopilot.update(self.time_ns, self.dt_s, self.imu, self.nav, self.world.battery)
         self.world.step(cmd, self.dt_s)
         self.time_ns += self.tick_ns
-        k = self.world.kinematics
-        self.imu = self._attitude(k)
-        self.nav = self._estimate(k, self.dt_s)
+        self._read(self.world.kinematics, self.dt_s)
 
-    def _tilt_error(self) -> tuple[float, float]:
-        """The emulated EKF's tilt error now (time since the first arming)."""
+    def _read(self, k: Kinematics, dt_s: float) -> None:
+        """What the sensors read of the true state ``k`` (NED), ``dt_s`` after the last reading:
+        :attr:`imu` and :attr:`nav` (with the emulation, through the firmware EKF's errors)."""
+        imu = self.sensors.imu(k)
+        if not self.emulate:
+            self.imu, self.nav = imu, self.sensors.nav(k)
+            return
         if self._armed_ns is None and self.autopilot.armed:
             self._armed_ns = self.time_ns
-        return self._tilt.error_rad(None if self._armed_ns is None else (self.time_ns - self._armed_ns) * 1e-9)
-
-    def _attitude(self, k: Kinematics) -> ImuReading:
-        """What the attitude sensors (the AHRS) read of the true state ``k``."""
-        imu = self.sensors.imu(k)
-        if self._tilt is None:
-            return imu
-        return self._tilt.apply(imu, self._tilt_error(), RATE_OFFSET_RAD_S)
-
-    def _estimate(self, k: Kinematics, dt_s: float) -> NavReading:
-        """What the position sensors read of the true state ``k`` (NED), ``dt_s`` after the last reading."""
-        if self._smoothed is not None:
-            k = self._smoothed.apply(k, dt_s)
-        nav = self.sensors.nav(k)
-        if self._height is None:
-            return nav
-        if self._horizontal is not None:
-            self._horizontal.advance(self._tilt_error(), dt_s, self._armed_ns is not None)
-            nav = self._horizontal.apply(nav)
-        return self._height.apply(nav, k.d, dt_s)
+        since_arm_s = None if self._armed_ns is None else (self.time_ns - self._armed_ns) * 1e-9
+        tilt = self._tilt.error_rad(since_arm_s)
+        self.imu = EkfTilt.apply(imu, tilt, RATE_OFFSET_RAD_S)
+        sensed = self._smoothed.apply(k, dt_s)
+        self._horizontal.advance(tilt, dt_s, since_arm_s is not None)
+        self.nav = self._height.apply(self._horizontal.apply(self.sensors.nav(sensed)), sensed.d, dt_s)

@@ -10,7 +10,7 @@ SITL's airframe.  ``benchmarks/bench_fidelity.py`` measures how well it does (do
 ``filters``        the gyro's two-pole low-pass and AC_PID
 ``attitude``       AC_AttitudeControl(_Multi): input_quaternion, input_rate_bf, angle and rate loops
 ``motors``         AP_MotorsMulticopter/Matrix: spool states, arming delay, mixer, thrust curve
-``ekf``            the EKF's estimate: height 0.1 s late and 6 mm low, attitude tilted ~0.1-0.2 deg,
+``ekf``            the EKF's estimate: height 0.035 s late and 6 mm low, attitude tilted ~0.1-0.2 deg,
                    horizontal position/velocity pulled off by that tilt
 ``ground``         ArduPilot SITL's sticky ground contact and smoothed sensors (the liftoff)
 ``status``         EKF readiness, PreArm texts, HEARTBEAT base_mode/system_status, AUTOPILOT_VERSION

@@ -101,12 +101,6 @@ class AttitudeControl:
         self.gyro_filtered: Vec3 = (0.0, 0.0, 0.0)
 
     # ------------------------------------------------------------------ targets
-    def reset_target(self, q_body: Sequence[float]) -> None:
-        """Target = the attitude flown now, zero rates (``reset_target_and_rate``, relax)."""
-        self.attitude_target = tuple(q_body)  # type: ignore[assignment]
-        self.ang_vel_target = [0.0, 0.0, 0.0]
-        self.ang_accel_target = [0.0, 0.0, 0.0]
-
     def reset_yaw_target(self, q_body: Sequence[float]) -> None:
         """The target's heading = the body's, no yaw rate (``reset_yaw_target_and_rate``)."""
         roll, pitch, _ = quaternion_to_euler(self.attitude_target)

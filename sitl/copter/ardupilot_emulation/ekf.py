@@ -38,7 +38,7 @@ from __future__ import annotations
 import itertools
 import math
 
-from quadrotor.frames import quaternion_to_euler
+from quadrotor.frames import quat_multiply, quaternion_to_euler
 from sitl.copter.sensors import ImuReading, NavReading
 
 __all__ = ["EkfHeight", "EkfHorizontal", "EkfTilt", "GROUND_OFFSET_M", "HEIGHT_LAG_S", "RATE_OFFSET_RAD_S",
@@ -133,13 +133,8 @@ class EkfTilt:
               rate_offset_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> ImuReading:
         """``imu`` with its attitude rotated by the earth-frame tilt ``error_rad`` (north, east) [rad] and
         ``rate_offset_rad_s`` (FRD) added to its body rates."""
-        dx, dy = 0.5 * error_rad[0], 0.5 * error_rad[1]
-        qw, qx, qy, qz = imu.qw, imu.qx, imu.qy, imu.qz
-        # (1, dx, dy, 0) * q: the rotation in the earth frame, after the body's
-        w = qw - dx * qx - dy * qy
-        x = qx + dx * qw + dy * qz
-        y = qy + dy * qw - dx * qz
-        z = qz + dx * qy - dy * qx
+        # (1, e_N/2, e_E/2, 0) * q: the small rotation in the earth frame, after the body's
+        w, x, y, z = quat_multiply((1.0, 0.5 * error_rad[0], 0.5 * error_rad[1], 0.0), (imu.qw, imu.qx, imu.qy, imu.qz))
         inv = 1.0 / math.sqrt(w * w + x * x + y * y + z * z)
         q = (w * inv, x * inv, y * inv, z * inv)
         roll, pitch, yaw = quaternion_to_euler(q)

@@ -12,8 +12,9 @@ reaction torque per thrust, ``0.05 x 0.35 m x command``, is linearised at hover.
 Its sensors are noise-free, as the firmware SITL's (``SIM_*_RND`` 0 in ``copter.parm``): what the
 firmware sends is its EKF's smooth output.  Measured in a hover (high-pass, 0.5 s moving average
 removed): LOCAL_POSITION_NED position 0.13-0.17 mm, velocity 0.30-0.35 mm/s, ATTITUDE angles 0.007
-deg, rates 0.07 deg/s; the emulation had 5 mm, 5 mm/s, 0.07 deg and 1.8 deg/s of white noise, which
-the disturbance observer and the rate damping passed on to the commands.  The EKF's *errors* are in
+deg, rates 0.07 deg/s.  The emulation had 5 mm, 5 mm/s, 0.03 deg and 0.11 deg/s of white noise (read
+the same way: 5 mm, 5 mm/s, 0.07 deg, 1.8 deg/s), which the disturbance observer and the rate damping
+passed on to the commands.  The EKF's *errors* are in
 :mod:`.ekf`.
 """
 
