@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -32,6 +33,8 @@ HEADING_DEG = -4.8  # the firmware SITL's heading (--home ... 353, then its EKF)
 def load(path: str) -> dict[str, np.ndarray]:
     from pymavlink import DFReader
 
+    if not Path(path).is_file():
+        raise SystemExit(f"{path}: no such dataflash log")
     log = DFReader.DFReader_binary(path)
     rows: dict[str, list] = {"ekf": [], "truth": [], "att": [], "sim": []}
     while (m := log.recv_msg()) is not None:
