@@ -27,6 +27,8 @@ class FakeLink:
         self.fail_get: set[str] = set()
         self.fail_set: set[str] = set()
         self.refuse: set[str] = set()
+        #: name -> values another system on the link writes, one after each of our PARAM_SETs of it.
+        self.tamper: dict[str, list[float]] = {}
         self.gets: list[str] = []
         self.sets: list[tuple[str, float]] = []
         #: The journal on disk at each PARAM_SET, as the vehicle is about to take it.
@@ -46,7 +48,10 @@ class FakeLink:
             raise LinkError(f"no PARAM_VALUE echo for {name} after {retries + 1} tries")
         if name not in self.refuse:
             self.values[name] = float(value)
-        return self.values[name]
+        held = self.values[name]  # the echo we get
+        if self.tamper.get(name):
+            self.values[name] = self.tamper[name].pop(0)
+        return held
 
 
 class Events(list):
@@ -235,6 +240,38 @@ def test_restore_failure_keeps_the_entry(tmp_path):
     assert j.load() == {"A": {"original": 0.0, "flight": 8.0}}
     assert link.values["B"] == 1.0
     assert any(t.startswith("A not restored") for t in events.texts("warning"))
+
+
+def test_restore_reads_back_and_puts_back_a_value_changed_after_its_echo(tmp_path):
+    # CI: another system replayed our PARAM_SET with a mutated value right after the restore's echo.
+    params, link, j, events = make(tmp_path, {"GUID_OPTIONS": 0.0, "ATC_ANGLE_BOOST": 1.0})
+    params.set("GUID_OPTIONS", 8.0, 0.0)
+    params.set("ATC_ANGLE_BOOST", 0.0, 1.0)
+    link.tamper["GUID_OPTIONS"] = [2147483648.0]
+    params.restore(disarmed)
+    assert link.values == {"GUID_OPTIONS": 0.0, "ATC_ANGLE_BOOST": 1.0}
+    assert link.sets[-1] == ("GUID_OPTIONS", 0.0)
+    assert link.gets.count("GUID_OPTIONS") == 2 and link.gets.count("ATC_ANGLE_BOOST") == 1
+    assert any(t.startswith("GUID_OPTIONS is 2.14748e+09 after it was restored to 0") for t in events.texts("warning"))
+    assert not j.path.exists()
+
+
+def test_restore_gives_up_on_a_value_that_keeps_changing(tmp_path):
+    params, link, _, events = make(tmp_path, {"A": 0.0})
+    params.set("A", 8.0, 0.0)
+    link.tamper["A"] = [5.0] * 10
+    params.restore(disarmed)
+    assert link.sets.count(("A", 0.0)) == 4  # the restore and 3 read-back rounds
+    assert any("A keeps changing after it is restored to 0" in t for t in events.texts("warning"))
+
+
+def test_restore_with_an_unreadable_read_back_warns(tmp_path):
+    params, link, _, events = make(tmp_path, {"A": 0.0})
+    params.set("A", 8.0, 0.0)
+    link.fail_get.add("A")
+    params.restore(disarmed)
+    assert link.values["A"] == 0.0
+    assert any(t.startswith("A: restored value not read back") for t in events.texts("warning"))
 
 
 def test_journal_write_failure_is_a_warning(tmp_path):

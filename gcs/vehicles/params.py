@@ -23,6 +23,7 @@ from pathlib import Path
 
 from gcs.errors import PreflightRefused
 from gcs.link.mavlink import LinkError
+from gcs.link.param_encoding import same_float32
 
 __all__ = ["ParamJournal", "VehicleParams", "state_dir", "STATE_DIR_ENV"]
 
@@ -192,6 +193,7 @@ class VehicleParams:
         """
         if not self.changed:
             return
+        put_back = {}
         for name, value in list(self.changed.items()):
             if armed():
                 self.event("warning", f"vehicle still armed: {name} left at its flight value")
@@ -200,6 +202,38 @@ class VehicleParams:
                 self.link.param_set(name, value, timeout_s=1.0, retries=1, on_message=self.on_message)
                 self.event("param", f"{name} restored to {value:g}")
                 del self.changed[name]
+                put_back[name] = value
             except LinkError as exc:
                 self.event("warning", f"{name} not restored: {exc}")
         self._save(self._journal_entries())
+        self._read_back(put_back)
+
+    def _read_back(self, put_back: dict[str, float], rounds: int = 3) -> None:
+        """Read every restored parameter once more and put back any that changed since its echo.
+
+        Another system on the link (a second ground station, a replay of our own PARAM_SET) can
+        change a parameter between our PARAM_SET's echo and the end of the flight; the vehicle
+        accepts PARAM_SET from any system id unless told otherwise.
+        """
+        for _ in range(rounds):
+            wrong = {}
+            for name, value in put_back.items():
+                try:
+                    now = self.link.param_get(name, timeout_s=1.0, retries=1, on_message=self.on_message)
+                except LinkError as exc:
+                    self.event("warning", f"{name}: restored value not read back: {exc}")
+                    continue
+                if not same_float32(now, value):
+                    wrong[name] = value
+                    self.event("warning", f"{name} is {now:g} after it was restored to {value:g} (changed by "
+                                          "another system on the link?): putting it back again")
+                    try:
+                        self.link.param_set(name, value, timeout_s=1.0, retries=1, on_message=self.on_message)
+                    except LinkError as exc:
+                        self.event("warning", f"{name} not restored: {exc}")
+            if not wrong:
+                return
+            put_back = wrong
+        for name, value in put_back.items():
+            self.event("warning", f"{name} keeps changing after it is restored to {value:g}; left as the vehicle "
+                                  "holds it")
