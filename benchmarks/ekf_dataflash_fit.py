@@ -1,7 +1,8 @@
 """The firmware EKF's tilt and horizontal errors, from ArduCopter SITL dataflash logs (issue 13.4).
 
 What ``sitl/copter/ardupilot_emulation/ekf.py`` (``TILT_PROFILE``, ``VELOCITY_GAIN_1_S``,
-``POSITION_GAIN_1_S``) was measured with.  Fly the firmware with its full dataflash log, e.g.::
+``POSITION_GAIN_1_S``, ``GROUND_VELOCITY_GAIN_1_S``, ``POSITION_LAG_S``) was measured with.
+Fly the firmware with its full dataflash log, e.g.::
 
     printf 'LOG_BITMASK 176127\\nLOG_DISARMED 0\\n' > /tmp/log.parm
     EXTRA_PARM=/tmp/log.parm INSTANCE=3 ../shared/arducopter/run /tmp/fw
@@ -10,10 +11,12 @@ What ``sitl/copter/ardupilot_emulation/ekf.py`` (``TILT_PROFILE``, ``VELOCITY_GA
 
 then ``python benchmarks/ekf_dataflash_fit.py /tmp/fw/logs/00000001.BIN [more.BIN ...]``.  Per log it
 prints the AHRS tilt error (``ATT`` minus the simulator's ``SIM`` roll and pitch, 2 s means from the
-first ``ATT`` record, which is at arming with ``LOG_DISARMED 0``); then it fits, over all logs,
-``de_v/dt = a - k_v e_v``, ``de_p/dt = e_v - k_p e_p`` per north/east axis to ``XKF1`` (the EKF) minus
-``SIM2`` (the truth), with ``a`` the false acceleration of that tilt (N ``-g e_E``, E ``+g e_N``), and
-prints k_v, k_p and the RMS of the data, the model and their difference; and per log the lag of the
+first ``ATT`` record, which is at arming with ``LOG_DISARMED 0``), the liftoff and ``k_g`` of the
+velocity error on the ground (``e_v = a / k_g``); then it fits, over all logs from the liftoff on,
+``de_v/dt = a - k_v e_v``, ``de_p/dt = e_v - k_p e_p`` plus a first-order lag of the position behind the
+truth, per north/east axis, to ``XKF1`` (the EKF) minus ``SIM2`` (the truth), with ``a`` the false
+acceleration of that tilt (N ``-g e_E``, E ``+g e_N``), and prints k_v, k_p, the lag and the RMS of the
+data, the model and their difference; and per log the lag of the
 EKF's height (``XKF1.PD``) behind the truth (``SIM2.PD``) in windows of the outdoor-circle flight
 (seconds from arming: the climb, its stop, the landing).  Needs pymavlink and scipy.
 """
@@ -61,17 +64,38 @@ def tilt_error_deg(d: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return att[:, 0] - att[0, 0], roll, pitch
 
 
+def liftoff_time(d: dict, climb_m: float = 0.005) -> float:
+    """Log time [s] the truth's down position first leaves its value at arming by ``climb_m``."""
+    truth, t_arm = d["truth"], d["att"][0, 0]
+    after = truth[truth[:, 0] >= t_arm]
+    moved = np.abs(after[:, 5] - after[0, 5]) > climb_m
+    if not moved.any():
+        raise SystemExit("the vehicle never left the ground in this log")
+    return float(after[moved.argmax(), 0])
+
+
 def prepare(d: dict):
-    """Times, EKF-minus-truth (pN, pE, vN, vE) with the origin offset removed, false accelerations N, E."""
+    """From the liftoff on: times, EKF-minus-truth (pN, pE, vN, vE) with the error at the liftoff removed
+    from the positions, false accelerations N, E.
+
+    On the ground the firmware's position error stays within a few millimetres while its velocity
+    reading is 4-10 mm/s off (the land detector holds it); so the model starts at the liftoff.
+    """
     ekf, truth = d["ekf"], d["truth"]
-    t = ekf[:, 0]
-    err = ekf[:, 1:5] - np.column_stack([np.interp(t, truth[:, 0], truth[:, k]) for k in range(1, 5)])
-    err[:, 0:2] -= err[:3, 0:2].mean(axis=0)  # the EKF origin is not the simulator's
+    keep = ekf[:, 0] >= liftoff_time(d)
+    t = ekf[keep, 0]
+    err = ekf[keep, 1:5] - np.column_stack([np.interp(t, truth[:, 0], truth[:, k]) for k in range(1, 5)])
+    err[:, 0:2] -= err[0, 0:2]  # the EKF origin is not the simulator's
+    return (t, err, *false_acceleration(d, t))
+
+
+def false_acceleration(d: dict, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The false acceleration (N ``-g e_E``, E ``+g e_N``) [m/s^2] of the AHRS's tilt error at times ``t``."""
     _, roll, pitch = tilt_error_deg(d)
     c, s = math.cos(math.radians(HEADING_DEG)), math.sin(math.radians(HEADING_DEG))
     north, east = np.radians(c * roll - s * pitch), np.radians(s * roll + c * pitch)
     at = d["att"][:, 0]
-    return t, err, -G * np.interp(t, at, east), G * np.interp(t, at, north)
+    return -G * np.interp(t, at, east), G * np.interp(t, at, north)
 
 
 HEIGHT_WINDOWS_S = ((4.5, 7.0), (7.0, 10.5), (10.5, 13.5), (24.0, 27.5))
@@ -109,9 +133,58 @@ def simulate(t, acc, kv, kp, v0, p0, h=0.0025):
     return out
 
 
-def main(argv=None) -> int:
+def lag_error(truth: np.ndarray, col: int, lag_s: float, t: np.ndarray) -> np.ndarray:
+    """First-order lag (time constant ``lag_s``) of the truth's column ``col`` minus the truth, at ``t``."""
+    x = truth[:, col]
+    if lag_s <= 0.0:
+        return np.zeros(len(t))
+    y = np.empty_like(x)
+    y[0] = x[0]
+    a = 1.0 - np.exp(-np.diff(truth[:, 0], prepend=truth[0, 0]) / lag_s)
+    for i in range(1, len(x)):
+        y[i] = y[i - 1] + a[i] * (x[i] - y[i - 1])
+    return np.interp(t, truth[:, 0], y - x)
+
+
+def model(theta, t, err, acc_ne, truth):
+    """Per axis N, E: the model's (position, velocity) errors for ``theta`` = (k_v, k_p, position lag)."""
+    kv, kp, lag = theta
+    out = []
+    for axis, acc in enumerate(acc_ne):
+        lp = lag_error(truth, 1 + axis, lag, t)
+        o = simulate(t, acc, kv, kp, err[0, 2 + axis], 0.0)
+        out.append((o[:, 0] + lp - lp[0], o[:, 1]))
+    return out
+
+
+def ground_velocity_gain(d: dict) -> float:
+    """``k_g`` of ``e_v = a / k_g`` on the ground between arming and liftoff (least squares over N and E)."""
+    ekf, truth = d["ekf"], d["truth"]
+    k = (ekf[:, 0] >= d["att"][0, 0]) & (ekf[:, 0] < liftoff_time(d))
+    t = ekf[k, 0]
+    ev = ekf[k, 3:5] - np.column_stack([np.interp(t, truth[:, 0], truth[:, c]) for c in (3, 4)])
+    a = np.column_stack(false_acceleration(d, t))
+    return float((a * ev).sum() / (ev * ev).sum())
+
+
+def fit_horizontal(prepared) -> tuple[tuple[float, float, float], float, float]:
+    """Least-squares (k_v, k_p, position lag) over ``prepared`` [(t, err, (a_N, a_E), truth), ...];
+    with the residual RMS and the RMS of the same k_v, k_p without the lag."""
     from scipy.optimize import least_squares
 
+    def residuals(theta):
+        res = []
+        for t, err, acc, truth in prepared:
+            for axis, (p, v) in enumerate(model(theta, t, err, acc, truth)):
+                res += [p - err[:, axis], v - err[:, 2 + axis]]
+        return np.concatenate(res)
+
+    fit = least_squares(residuals, [1.5, 1.0, 0.04], bounds=([0.0, 0.0, 0.0], [50.0, 10.0, 0.5]))
+    kv, kp, lag = (float(x) for x in fit.x)
+    return (kv, kp, lag), math.sqrt(np.mean(fit.fun ** 2)), math.sqrt(np.mean(residuals((kv, kp, 0.0)) ** 2))
+
+
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("logs", nargs="+", help="dataflash .BIN files")
     args = ap.parse_args(argv)
@@ -121,27 +194,18 @@ def main(argv=None) -> int:
         print(f"{path}: tilt error roll/pitch [deg], 2 s means from arming")
         print("  " + "  ".join(f"{a:g}s {roll[k].mean():.3f}/{pitch[k].mean():.3f}"
                                for a in range(0, int(t[-1]) - 1, 2) for k in [(t >= a) & (t < a + 2)]))
-    prepared = [prepare(d) for d in data]
-
-    def residuals(theta):
-        kv, kp = theta
-        res = []
-        for t, err, an, ae in prepared:
-            for axis, acc in ((0, an), (1, ae)):
-                o = simulate(t, acc, kv, kp, err[0, 2 + axis], err[0, axis])
-                res += [o[:, 0] - err[:, axis], o[:, 1] - err[:, 2 + axis]]
-        return np.concatenate(res)
-
-    fit = least_squares(residuals, [1.5, 0.3], bounds=([0.0, 0.0], [50.0, 10.0]))
-    kv, kp = fit.x
-    print(f"fit: k_v {kv:.2f} 1/s, k_p {kp:.2f} 1/s (residual RMS {math.sqrt(np.mean(fit.fun ** 2)):.4f})")
+        print(f"  liftoff {liftoff_time(d) - d['att'][0, 0]:.2f} s after arming; on the ground e_v = a / k_g with "
+              f"k_g {ground_velocity_gain(d):.2f} 1/s")
+    prepared = [(t, err, (an, ae), d["truth"]) for d in data for t, err, an, ae in [prepare(d)]]
+    (kv, kp, lag), rms, no_lag = fit_horizontal(prepared)
+    print(f"fit from the liftoff: k_v {kv:.2f} 1/s, k_p {kp:.2f} 1/s, position lag {lag:.3f} s (residual RMS "
+          f"{rms:.4f}; without the lag {no_lag:.4f})")
     print("log  axis  position RMS data/model/diff [m]   velocity RMS data/model/diff [m/s]")
-    for path, (t, err, an, ae) in zip(args.logs, prepared):
-        for axis, acc, name in ((0, an, "N"), (1, ae, "E")):
-            o = simulate(t, acc, kv, kp, err[0, 2 + axis], err[0, axis])
-            rms = [math.sqrt(np.mean(x ** 2)) for x in (err[:, axis], o[:, 0], o[:, 0] - err[:, axis],
-                                                         err[:, 2 + axis], o[:, 1], o[:, 1] - err[:, 2 + axis])]
-            print(f"{path[-24:]}  {name}  " + " / ".join(f"{v:.4f}" for v in rms[:3]) + "   "
+    for path, (t, err, acc, truth) in zip(args.logs, prepared):
+        for axis, (p, v) in enumerate(model((kv, kp, lag), t, err, acc, truth)):
+            rms = [math.sqrt(np.mean(x ** 2)) for x in (err[:, axis], p, p - err[:, axis],
+                                                         err[:, 2 + axis], v, v - err[:, 2 + axis])]
+            print(f"{path[-24:]}  {'NE'[axis]}  " + " / ".join(f"{v:.4f}" for v in rms[:3]) + "   "
                   + " / ".join(f"{v:.4f}" for v in rms[3:]))
     for path, d in zip(args.logs, data):
         print(f"{path[-24:]} height lag behind the truth: " + "; ".join(

@@ -135,6 +135,7 @@ class Simulation:
         self._tilt = EkfTilt() if emulate else None
         self._horizontal = EkfHorizontal(vehicle.gravity_m_s2) if emulate else None
         self._armed_ns: int | None = None
+        self._lifted_off = False
         self._read(k, 0.0)
         self.autopilot.observe(self.imu, self.nav, self.world.battery)
 
@@ -163,5 +164,6 @@ class Simulation:
         tilt = self._tilt.error_rad(since_arm_s)
         self.imu = EkfTilt.apply(imu, tilt, RATE_OFFSET_RAD_S)
         sensed = self._smoothed.apply(k, dt_s)
-        self._horizontal.advance(tilt, dt_s, since_arm_s is not None)
-        self.nav = self._height.apply(self._horizontal.apply(self.sensors.nav(sensed)), sensed.d, dt_s)
+        self._lifted_off = self._lifted_off or not self.world.on_ground
+        self._horizontal.advance(tilt, dt_s, self._lifted_off)
+        self.nav = self._height.apply(self._horizontal.apply(self.sensors.nav(sensed), dt_s), sensed.d, dt_s)

@@ -69,8 +69,9 @@ def test_the_emulated_simulation_reports_the_offset_estimate_from_boot():
 
 # ---------------------------------------------------------------- tilt and horizontal estimate
 
-from sitl.copter.ardupilot_emulation.ekf import (POSITION_GAIN_1_S, RATE_OFFSET_RAD_S, TILT_PROFILE,  # noqa: E402
-                                                 VELOCITY_GAIN_1_S, EkfHorizontal, EkfTilt)
+from sitl.copter.ardupilot_emulation.ekf import (GROUND_VELOCITY_GAIN_1_S, POSITION_GAIN_1_S,  # noqa: E402
+                                                 POSITION_LAG_S, RATE_OFFSET_RAD_S, TILT_PROFILE, VELOCITY_GAIN_1_S,
+                                                 EkfHorizontal, EkfTilt)
 from sitl.copter.sensors import ImuReading  # noqa: E402
 from quadrotor.frames import euler_to_quaternion  # noqa: E402
 
@@ -119,20 +120,55 @@ def test_a_bad_profile_is_refused(profile):
 
 def test_a_steady_tilt_error_gives_the_velocity_and_position_errors_of_the_fit():
     g, north, east = 9.81, math.radians(0.15), math.radians(0.1)
-    h = EkfHorizontal(g)
-    h.advance((north, east), 0.0025, armed=False)
-    # waiting on the ground: the velocity reading already off, the position not
-    assert h.velocity_error == pytest.approx([-g * east / VELOCITY_GAIN_1_S, g * north / VELOCITY_GAIN_1_S])
+    h = EkfHorizontal(g, position_lag_s=0.0)
+    h.advance((north, east), 0.0025, lifted_off=False)
+    # waiting on the ground: the velocity reading off (less than in flight), the position not
+    kg = GROUND_VELOCITY_GAIN_1_S
+    assert h.velocity_error == pytest.approx([-g * east / kg, g * north / kg])
     assert h.position_error == [0.0, 0.0]
-    for _ in range(8000):  # 20 s armed: settled
+    for _ in range(8000):  # 20 s in the air: settled
         h.advance((north, east), 0.0025)
     v = [-g * east / VELOCITY_GAIN_1_S, g * north / VELOCITY_GAIN_1_S]
     assert h.velocity_error == pytest.approx(v, rel=1e-3)
     assert h.position_error == pytest.approx([x / POSITION_GAIN_1_S for x in v], rel=1e-2)
-    out = h.apply(NavReading(1.0, 2.0, -1.5, 0.3, -0.4, 0.0, 1.5, -1.0))
+    out = h.apply(NavReading(1.0, 2.0, -1.5, 0.3, -0.4, 0.0, 1.5, -1.0), 0.0025)
     assert (out.n, out.e) == pytest.approx((1.0 + h.position_error[0], 2.0 + h.position_error[1]))
     assert (out.vn, out.ve) == pytest.approx((0.3 + v[0], -0.4 + v[1]), rel=1e-3)
     assert (out.d, out.vd, out.baro_alt_m) == (-1.5, 0.0, 1.5)
+
+
+def test_the_horizontal_position_lags_the_sensed_one_and_the_velocity_does_not():
+    h = EkfHorizontal(9.81)
+    assert pytest.approx(0.047) == POSITION_LAG_S
+    dt, speed = 0.0025, 2.0
+    out = None
+    for i in range(2000):  # 5 s at 2 m/s north: the first-order lag settles
+        out = h.apply(NavReading(speed * i * dt, 0.0, -1.0, speed, 0.0, 0.0, 1.0, 0.0), dt)
+    # a ramp through a first-order lag falls behind by speed * time constant
+    assert speed * 1999 * dt - out.n == pytest.approx(speed * POSITION_LAG_S, rel=0.03)
+    assert out.vn == speed and out.e == 0.0
+
+
+def test_the_horizontal_errors_refuse_bad_gains():
+    with pytest.raises(ValueError, match="ground gain"):
+        EkfHorizontal(9.81, ground_velocity_gain_1_s=0.0)
+    with pytest.raises(ValueError):
+        EkfHorizontal(9.81, position_lag_s=math.nan)
+
+
+def test_the_emulated_position_stays_true_on_the_ground_and_drifts_once_in_the_air():
+    from sitl.copter.ardupilot_emulation.vehicle import arducopter_sitl_vehicle
+    from sitl.copter.simulation import Simulation
+
+    sim = Simulation(arducopter_sitl_vehicle(), emulate="arducopter", ekf_ready_s=0.0)
+    for _ in range(1200):  # 3 s on the ground
+        sim.tick()
+    assert (sim.nav.n, sim.nav.e) == pytest.approx((sim.world.kinematics.n, sim.world.kinematics.e), abs=1e-9)
+    assert abs(sim.nav.vn) > 1e-3  # ... while its velocity reading is off
+    sim._lifted_off = True  # as after a liftoff: the velocity error now moves the position
+    for _ in range(400):
+        sim.tick()
+    assert abs(sim.nav.n - sim.world.kinematics.n) > 1e-3
 
 
 def test_the_emulated_vehicle_reports_the_tilted_attitude_and_the_pulled_velocity():
@@ -155,9 +191,9 @@ def test_the_emulated_vehicle_reports_the_tilted_attitude_and_the_pulled_velocit
     north, east = EkfTilt().error_rad(None)
     assert sums[0] == pytest.approx(north, abs=2e-4) and sums[1] == pytest.approx(east, abs=2e-4)
     assert math.degrees(north) == pytest.approx(0.100, abs=0.002)
-    # the velocity reading off by the steady false acceleration: about -8.8 / +12.1 mm/s
-    assert sums[2] == pytest.approx(-9.81 * east / VELOCITY_GAIN_1_S, abs=1e-3)
-    assert sums[3] == pytest.approx(9.81 * north / VELOCITY_GAIN_1_S, abs=1e-3)
+    # the velocity reading off by the ground's steady state of the false acceleration: about -4.6 / +6.4 mm/s
+    assert sums[2] == pytest.approx(-9.81 * east / GROUND_VELOCITY_GAIN_1_S, abs=1e-3)
+    assert sums[3] == pytest.approx(9.81 * north / GROUND_VELOCITY_GAIN_1_S, abs=1e-3)
     # the rates the firmware's AHRS reads at rest
     assert sums[6:9] == pytest.approx(RATE_OFFSET_RAD_S, abs=2e-5)
     assert math.degrees(RATE_OFFSET_RAD_S[2]) == pytest.approx(0.21)
