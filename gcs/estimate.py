@@ -40,6 +40,14 @@ into half a metre of drift).  With ``H(s) = 1 / (tau_b s + 1)`` low-passing both
 
 and the velocity readings are fused as ``v_read - b``: their slow part then follows the
 positions, their fast part stays.  Without an observer nothing changes.
+
+Both estimates assume readings that arrive steadily.  Across a gap (a radio drop-out: no reading
+for more than ``reading_gap_s``; a stalled ground station: :meth:`DisturbanceObserver.restart`,
+whose backlog then arrives at once) the position jumps by everything the vehicle did meanwhile,
+which the low-passes would take for a velocity offset of up to ``jump / tau_b`` and the learning
+for a disturbance.  So the offset ``b`` is held while no reading comes, the low-passes step
+over the gap as if it had taken one step (the position low-pass moved by the jump), and the
+corrections that close the gap are not learnt from.
 """
 
 from __future__ import annotations
@@ -143,13 +151,18 @@ class DisturbanceObserver:
         ``tau_b``: the low-pass of the velocity-reading offset (seconds, > 0).
     max_velocity_bias_m_s : float
         The offset is clipped to +-this per axis.
+    reading_gap_s : float
+        No position reading for longer than this [s] is a gap (see the module docstring).
     """
 
     def __init__(self, time_constant_s: float, *, drag_1_s: float = 0.0, max_m_s2: float = 3.0,
                  min_height_m: float = 0.3, min_thrust_fraction: float = 0.5,
-                 velocity_bias_time_constant_s: float = 10.0, max_velocity_bias_m_s: float = 0.5) -> None:
-        if not time_constant_s > 0 or not max_m_s2 > 0 or not drag_1_s >= 0 or not velocity_bias_time_constant_s > 0:
-            raise ValueError("time_constant_s, max_m_s2 and velocity_bias_time_constant_s must be > 0, drag_1_s >= 0")
+                 velocity_bias_time_constant_s: float = 10.0, max_velocity_bias_m_s: float = 0.5,
+                 reading_gap_s: float = 0.2) -> None:
+        if not time_constant_s > 0 or not max_m_s2 > 0 or not drag_1_s >= 0 or not velocity_bias_time_constant_s > 0 \
+                or not reading_gap_s > 0:
+            raise ValueError("time_constant_s, max_m_s2, velocity_bias_time_constant_s and reading_gap_s must be > 0, "
+                             "drag_1_s >= 0")
         self.time_constant_s = time_constant_s
         self.drag_1_s = drag_1_s
         self.max_m_s2 = max_m_s2
@@ -157,15 +170,33 @@ class DisturbanceObserver:
         self.min_thrust_fraction = min_thrust_fraction
         self.velocity_bias_time_constant_s = velocity_bias_time_constant_s
         self.max_velocity_bias_m_s = max_velocity_bias_m_s
+        self.reading_gap_s = reading_gap_s
         self.value = [0.0, 0.0, 0.0]
         self.velocity_bias = [0.0, 0.0, 0.0]
         self.learning = False
         self.ground_z_m: float | None = None
         self._read: list[list[float | None]] = [[None, None] for _ in range(3)]  # latest (position, velocity)
         self._low: list[list[float] | None] = [None, None, None]                 # H p_read, H v_read
+        self._since = [0.0, 0.0, 0.0]      # time since the last position reading [s] (advanced by advance())
+        self._new = [False, False, False]  # a position reading came since the last advance()
+        self._hold = [False, False, False]  # closing a gap: no learning from this step's corrections
+        self._gap = [False, False, False]   # closing a gap: the next step moves the position low-pass by the jump
+        self._used = [0.0, 0.0, 0.0]        # the position reading of the last step [m]
+
+    def restart(self) -> None:
+        """After a gap in the readings the caller knows of (the loop stalled: its backlog comes at once):
+        the next :meth:`advance` steps the low-passes over it as one step, and nothing is learnt from the
+        corrections before it; ``b`` and ``d`` are kept."""
+        self._gap = [True, True, True]
+        self._hold = [True, True, True]
 
     def position_reading(self, axis: int, z: float) -> None:
-        """A position reading [m] of ``axis`` (for the velocity-reading offset)."""
+        """A position reading [m] of ``axis`` (for the velocity-reading offset); the first after a gap
+        of more than ``reading_gap_s`` closes a gap on that axis (see :meth:`restart`)."""
+        if self._since[axis] > self.reading_gap_s:
+            self._gap[axis] = True
+            self._hold[axis] = True
+        self._new[axis] = True
         self._read[axis][0] = z
 
     def velocity_reading(self, axis: int, z: float) -> float:
@@ -174,16 +205,28 @@ class DisturbanceObserver:
         return z - self.velocity_bias[axis]
 
     def advance(self, dt_s: float) -> None:
-        """Run the low-passes of the readings (held since they came) over ``dt_s`` [s]; update ``b``."""
+        """Run the low-passes of the readings over the ``dt_s`` [s] since the last call: per axis, once a
+        new position reading has come, over the time since the one before; update ``b``."""
         tau, lim = self.velocity_bias_time_constant_s, self.max_velocity_bias_m_s
-        a = min(1.0, dt_s / tau)
+        self._hold = [False, False, False]
         for i, (p, v) in enumerate(self._read):
+            if not self._new[i]:  # nothing new: the offset held, the time counted
+                self._since[i] += dt_s
+                continue
+            step_s = self._since[i] + dt_s
+            self._new[i], self._since[i] = False, 0.0
             if p is None or v is None:
                 continue
             low = self._low[i]
             if low is None:
                 self._low[i] = [p, v]
+                self._used[i] = p
                 continue
+            if self._gap[i]:  # as if the jump had been one step: the lag of the low-pass kept
+                low[0] += p - self._used[i]
+                step_s, self._gap[i] = dt_s, False
+            self._used[i] = p
+            a = min(1.0, step_s / tau)
             # d/dt (H p) from the low-pass *before* this step: with Euler's a = dt / tau, the updated one
             # gives (1 - a) dp/dt for a constant velocity, a false offset of a v (6.7 % of every
             # velocity at tau_b = 0.15 s, 10 ms steps); the previous one gives dp/dt exactly.
@@ -200,8 +243,8 @@ class DisturbanceObserver:
         self.learning = z_m - g >= self.min_height_m and thrust_n >= self.min_thrust_fraction * hover_thrust_n
 
     def absorb(self, axis: int, dv_m_s: float) -> None:
-        """A velocity correction ``dv_m_s`` of ``axis`` (0 x, 1 y, 2 z)."""
-        if self.learning:
+        """A velocity correction ``dv_m_s`` of ``axis`` (0 x, 1 y, 2 z) (not learnt from across a gap)."""
+        if self.learning and not self._hold[axis]:
             lim = self.max_m_s2
             v = self.value[axis] + dv_m_s / self.time_constant_s
             self.value[axis] = lim if v > lim else -lim if v < -lim else v

@@ -189,3 +189,111 @@ def test_readings_that_agree_give_no_velocity_offset_on_a_circle(tau_b):
         if t > 10.0 * tau_b + 5.0:
             worst = max(worst, abs(obs.velocity_bias[0]), abs(obs.velocity_bias[1]))
     assert worst < 0.003 * w  # under 0.3 % of the speed (measured 0.16 %)
+
+
+def _circle_reading(obs, t, w=2.0 * math.pi / 20.0):
+    obs.position_reading(0, math.cos(w * t))
+    obs.position_reading(1, math.sin(w * t))
+    obs.velocity_reading(0, -w * math.sin(w * t))
+    obs.velocity_reading(1, w * math.cos(w * t))
+
+
+def test_readings_at_half_the_loop_rate_give_no_velocity_offset():
+    """50 Hz telemetry, 100 Hz loop: the low-passes step over the time between readings."""
+    obs = DisturbanceObserver(0.15, velocity_bias_time_constant_s=0.15)
+    worst = 0.0
+    for k in range(3000):
+        obs.advance(0.01)
+        if k % 2 == 0:
+            _circle_reading(obs, k * 0.01)
+        if k > 500:
+            worst = max(worst, abs(obs.velocity_bias[0]), abs(obs.velocity_bias[1]))
+    # Euler over 20 ms of a curving path: 0.3 % of the speed (one step miscounted would read 6.7 %)
+    assert worst < 0.005 * 2.0 * math.pi / 20.0
+
+
+@pytest.mark.parametrize("how", ["drop-out", "stalled loop"])
+def test_a_gap_in_the_readings_is_neither_a_velocity_offset_nor_a_disturbance(how):
+    """1 s without readings on a 0.31 m/s circle: the position comes back 0.31 m on.  Taken as steady
+    readings, (p - H p) / tau_b reads 2 m/s (clipped to 0.5) and the closing correction a disturbance;
+    both are held across the gap instead (drop-out: no reading for > reading_gap_s; stalled loop: the
+    session calls restart() and the backlog arrives before the next advance)."""
+    obs = DisturbanceObserver(0.15, velocity_bias_time_constant_s=0.15)
+    obs.learning = True
+    k = 0
+    for k in range(500):
+        obs.advance(0.01)
+        _circle_reading(obs, k * 0.01)
+    if how == "drop-out":
+        obs.advance(0.01)  # takes the last reading
+        before = list(obs.velocity_bias)
+        for _ in range(99):  # the loop runs on, nothing comes
+            obs.advance(0.01)
+            assert obs.velocity_bias == before  # held while nothing comes
+        k += 101
+        _circle_reading(obs, k * 0.01)
+    else:
+        obs.restart()
+        for _ in range(100):  # the backlog, all at once
+            k += 1
+            _circle_reading(obs, k * 0.01)
+    value = list(obs.value)
+    obs.absorb(0, 0.2)  # the corrections that close the gap
+    obs.absorb(1, -0.2)
+    assert obs.value == value
+    peak = 0.0
+    for j in range(200):
+        k += 1
+        obs.advance(0.01)
+        _circle_reading(obs, k * 0.01)
+        peak = max(peak, abs(obs.velocity_bias[0]), abs(obs.velocity_bias[1]))
+    # the velocity turned by 0.31 rad over the gap: a short transient of the low-passes (measured 0.020 m/s)
+    # where the jump read as an offset at the clip (0.5 m/s)
+    assert peak < 0.03
+    assert abs(obs.velocity_bias[0]) < 0.002 and abs(obs.velocity_bias[1]) < 0.002
+    obs.absorb(0, 0.15)  # and then it learns again
+    assert obs.value[0] == pytest.approx(value[0] + 1.0)
+
+
+def test_without_the_gap_rule_a_gap_would_read_as_a_large_offset():
+    """The same drop-out under a gap threshold longer than it: the offset jumps to its clip."""
+    obs = DisturbanceObserver(0.15, velocity_bias_time_constant_s=0.15, reading_gap_s=5.0)
+    for k in range(500):
+        obs.advance(0.01)
+        _circle_reading(obs, k * 0.01)
+    for _ in range(100):
+        obs.advance(0.01)
+    _circle_reading(obs, 600 * 0.01)
+    obs.advance(0.01)
+    assert max(abs(b) for b in obs.velocity_bias[:2]) == pytest.approx(0.5)
+
+
+def test_a_bad_reading_gap_is_refused():
+    with pytest.raises(ValueError, match="reading_gap_s"):
+        DisturbanceObserver(0.15, reading_gap_s=0.0)
+
+
+def test_the_mavlink_session_restarts_the_observer_on_a_backlog():
+    """A drained batch with more positions than the reading gap holds at the telemetry rate (a stalled
+    loop's backlog, here 50 Hz x 0.2 s = 10) restarts the observer before the telemetry takes it."""
+    from types import SimpleNamespace
+
+    from gcs.vehicles.mavlink import MavlinkSession
+
+    class Msg:
+        def __init__(self, kind):
+            self.kind = kind
+
+        def get_type(self):
+            return self.kind
+
+    obs = DisturbanceObserver(0.15, velocity_bias_time_constant_s=0.15)
+    session = SimpleNamespace(estimator=SimpleNamespace(disturbance=obs),
+                              config=SimpleNamespace(flight=SimpleNamespace(telemetry_rate_hz=50.0)))
+    steady = [Msg("LOCAL_POSITION_NED"), Msg("ATTITUDE")] * 10
+    MavlinkSession._backlog(session, steady)
+    assert obs._hold == [False, False, False]
+    MavlinkSession._backlog(session, steady + [Msg("LOCAL_POSITION_NED")])
+    assert obs._hold == [True, True, True] and obs._gap == [True, True, True]
+    session.estimator.disturbance = None
+    MavlinkSession._backlog(session, steady * 5)  # no observer: nothing to do

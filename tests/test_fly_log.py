@@ -65,6 +65,7 @@ def test_every_channel_is_there_and_round_trips(flown):
     for topic in (T.COMMAND, T.COMMAND_LIMITED, T.ERROR, T.HORIZON, T.COST, T.TIMING):
         assert log.counts[topic] == ticks, topic
     assert log.counts[T.STATE] == log.counts[T.REFERENCE] == ticks + 1  # + the state closing the record
+    assert T.DISTURBANCE not in log.counts  # the built-in SITL flies without the disturbance observer ("auto")
     for topic in ("/mavlink/in/ATTITUDE", "/mavlink/in/LOCAL_POSITION_NED", "/mavlink/in/HEARTBEAT",
                   "/mavlink/in/COMMAND_ACK", "/mavlink/in/PARAM_VALUE", "/mavlink/in/STATUSTEXT",
                   "/mavlink/out/SET_ATTITUDE_TARGET", "/mavlink/out/COMMAND_LONG", "/mavlink/out/PARAM_SET",
@@ -102,6 +103,30 @@ def test_every_channel_is_there_and_round_trips(flown):
     assert {"config.json", "config.toml", "gains/nlsoc.json"} <= names
     cfg = json.loads(log.attachment("config.json").data)
     assert sum(p["duration_s"] for p in cfg["mission"]["phases"]) == 12.0  # the mission as flown (--duration)
+
+
+def test_the_disturbance_observer_is_logged_every_tick_when_on(tmp_path):
+    config = Path(__file__).resolve().parents[1] / "configs" / "outdoor-circle.toml"
+    text = config.read_text().replace("[estimator]\n", '[estimator]\ndisturbance = "on"\n')
+    (tmp_path / "observed.toml").write_text(text)
+    log_path, summary_path = tmp_path / "flight.mcap", tmp_path / "summary.json"
+    p = _fly("--sitl", "lockstep", "--controller", "nlsoc", "--config", str(tmp_path / "observed.toml"),
+             "--duration", "6", "--log", str(log_path), "--summary", str(summary_path))
+    assert p.returncode == 0, p.stderr
+    ticks = json.loads(summary_path.read_text())["loop"]["ticks"]
+    log = read_log(log_path)
+    assert log.counts[T.DISTURBANCE] == ticks
+    rows = [d for _, d in log.decoded(T.DISTURBANCE)]
+    assert all(list(d) == list(T.DISTURBANCE_FIELDS) for d in rows)
+    # within the observer's clips: the learnt part 3 m/s^2 (plus the drag term), the velocity offset 0.5 m/s
+    assert all(abs(d[f]) <= 3.5 for d in rows for f in T.DISTURBANCE_FIELDS[:3])
+    assert all(abs(d[f]) <= 0.5 for d in rows for f in T.DISTURBANCE_FIELDS[3:])
+    # on the ground only the drag term of the noisy velocity; once airborne it learns (here mostly the
+    # built-in SITL's white position/velocity noise: the observer is off there by default, "auto")
+    assert all(abs(d["dx_m_s2"]) < 0.5 for d in rows[:50])
+    assert max(abs(d["dx_m_s2"]) for d in rows[-300:]) > 0.5
+    name, schema = T.schema_for(T.DISTURBANCE)
+    assert name == "gcs.Disturbance" and schema["required"] == list(T.DISTURBANCE_FIELDS)
 
 
 def test_info_names_the_flight(flown, capsys):

@@ -23,6 +23,7 @@ rng = np.random.default_rng(7)
 STATE = State(*rng.normal(size=12))
 REF = State(*rng.normal(size=12))
 TRUTH = State(*(rng.normal(size=12) * 1e-7))
+DISTURBANCE = (0.025, -0.032, 0.125, 0.001, -0.0015, 1e-17)
 CMD = Command(*rng.normal(size=4) * 10)
 LIMITED = Command(9.81, 0.0, -1e-300, 5e300)
 
@@ -51,7 +52,8 @@ def _write_everything(path, **kw):
         log.attachment("gains/loc.json", "application/json", b"\x00\x01")
         assert log.flight_start(1_000, controller="loc", experiment="outdoor-altitude", ts_s=0.01, steps=2) == 0
         log.control_tick(1_000, state=STATE, reference=REF, command=CMD, command_limited=LIMITED, k=0,
-                         steps_to_go=60000, mode="horizon", cost=(1.5, 2.25, 3.75), truth=TRUTH)
+                         steps_to_go=60000, mode="horizon", cost=(1.5, 2.25, 3.75), truth=TRUTH,
+                         disturbance=DISTURBANCE)
         log.control_tick(11_000, state=list(STATE), reference=np.array(REF), command=CMD, k=1, steps_to_go=0,
                          mode="fallback_pd")
         log.event(11_000, "mode", "GUIDED_NOGPS", custom_mode=20, armed=True)
@@ -88,6 +90,8 @@ def test_every_channel_round_trips(tmp_path):
             expect = (expect + math.pi) % (2 * math.pi) - math.pi
         assert err[f] == expect
     assert [d[T.COMMAND][0][1][f] for f in cf] == list(CMD)
+    assert [t for t, _ in d[T.DISTURBANCE]] == [1_000]  # only the tick that gave one
+    assert [d[T.DISTURBANCE][0][1][f] for f in T.DISTURBANCE_FIELDS] == list(DISTURBANCE)
     assert [d[T.COMMAND_LIMITED][0][1][f] for f in cf] == list(LIMITED) and len(d[T.COMMAND_LIMITED]) == 1
     assert [m for _, m in d[T.HORIZON]] == [{"k": 0, "steps_to_go": 60000, "mode": "horizon"},
                                             {"k": 1, "steps_to_go": 0, "mode": "fallback_pd"}]

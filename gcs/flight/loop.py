@@ -316,7 +316,7 @@ class MissionLoop:
             rec.tick(wake, k, state, ref, raw, cmd, j,
                      horizon_mode(k, h.horizon_steps if h else None, h.after if h else None),
                      LoopTiming(late / 1e9, (c4 - c0) / 1e9, late >= self.ts_ns, (c1 - c0) / 1e9, (c2 - c1) / 1e9,
-                                (c3 - c2) / 1e9, (c4 - c3) / 1e9, tr.log_prev_ns / 1e9))
+                                (c3 - c2) / 1e9, (c4 - c3) / 1e9, tr.log_prev_ns / 1e9), self.session.observer_log())
         if self.stats is not None:
             c0, c1, c2, c3, c4 = c
             c5 = time.perf_counter_ns()

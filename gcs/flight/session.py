@@ -5,7 +5,8 @@ firmware conventions are an autopilot profile), the 4-DOF rig (:class:`gcs.vehic
 and the in-process plant of ``gcs sim`` (:class:`gcs.vehicles.plant.PlantSession`).  The loop
 (:class:`gcs.flight.loop.MissionLoop`) calls, each tick: :meth:`pump`, :meth:`estimate`,
 :meth:`disturbance_m_s2`, the checks (:meth:`fresh`, :meth:`health`, :meth:`control_lost`),
-then :meth:`send`; once a second :meth:`housekeeping`; after the mission :meth:`finish`.
+then :meth:`send` (and for the log :meth:`observer_log`); once a second :meth:`housekeeping`; after
+the mission :meth:`finish`.
 """
 
 from __future__ import annotations
@@ -50,6 +51,10 @@ class VehicleSession(Protocol):
     def disturbance_m_s2(self) -> tuple[float, float, float]:
         """The estimated steady disturbance acceleration (x, y, z up; paper frame) [m/s^2] the
         controller compensates; zeros where none is estimated."""
+
+    def observer_log(self) -> tuple[float, float, float, float, float, float] | None:
+        """The disturbance observer's estimate for the log (:data:`gcs.log.topics.DISTURBANCE_FIELDS`:
+        the acceleration the laws are given, then the velocity-reading offset), None without an observer."""
 
     def fresh(self, now_ns: int, stale_s: float) -> bool:
         """Telemetry newer than ``stale_s``."""

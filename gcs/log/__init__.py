@@ -36,6 +36,11 @@ Topics (paper frame: x north, y east, z **up**; SI units; field names in the sch
     Stage terms of the controller's own cost J (eq. 5 LOC, eq. 17 NLSOC; absent for PD):
     ``state_cost`` = ½ xᵀQx, ``input_cost`` = ½ uᵀRu, ``stage_cost`` their sum (on the truth in
     simulation); J = Σ stage_cost over the horizon + ½ x(M)ᵀH x(M).
+``/control/disturbance``
+    Flight only, with the disturbance observer on (``[estimator] disturbance``): dx_m_s2, dy_m_s2,
+    dz_m_s2 [m/s²], the acceleration eq. 1 misses as the laws are given it (before the reference's
+    acceleration is taken off), and velocity_bias_x_m_s, _y_, _z_ [m/s], the offset taken off the
+    velocity readings (:class:`gcs.estimate.DisturbanceObserver`).
 ``/sim/truth``
     Simulation only: the true plant state, same fields as the estimate, one message per tick
     plus the state after the last command (what ``gcs sim`` computes its metrics on).

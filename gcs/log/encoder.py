@@ -122,7 +122,7 @@ class RecordEncoder:
                                     rec.command if limited is None else limited)
         text = self._text
         items = text.items(state, text.reference(ref), tracking_error(ref, state), rec.command, limited, rec.k,
-                           rec.steps_to_go, rec.mode, cost, rec.truth)
+                           rec.steps_to_go, rec.mode, cost, rec.truth, rec.disturbance)
         if rec.timing is not None:
             items.append((T.TIMING, timing_json(rec.k, rec.timing)))
         self.log.add(items, self._origin + rec.t_ns)

@@ -126,7 +126,7 @@ def mavlink_items(direction: str, msg: Any, raw: bool = True) -> list[tuple[str,
 
 class TickText:
     """The messages of control ticks: ``/control/state``, ``reference``, ``error``, ``command``,
-    ``command_limited``, ``horizon``, ``cost`` and ``/sim/truth``, in that order.
+    ``command_limited``, ``horizon``, ``cost``, ``/sim/truth`` and ``/control/disturbance``, in that order.
 
     Keeps the last reference's text (references hold still most of a flight) and each mode's.
     """
@@ -154,7 +154,8 @@ class TickText:
 
     def items(self, state: Sequence[float], reference_text: bytes, error: Sequence[float] | None,
               command: Sequence[float], command_limited: Sequence[float] | None, k: int | None, steps_to_go: int,
-              mode: str, cost: Sequence[float] | None, truth: Sequence[float] | None) -> list[tuple[str, bytes]]:
+              mode: str, cost: Sequence[float] | None, truth: Sequence[float] | None,
+              disturbance: Sequence[float] | None = None) -> list[tuple[str, bytes]]:
         """``(topic, message)`` of one tick; None leaves a topic out (``k`` None: no horizon)."""
         items = [(T.STATE, _STATE(state)), (T.REFERENCE, reference_text)]
         if error is not None:
@@ -168,8 +169,11 @@ class TickText:
             items.append((T.COST, _COST(cost)))
         if truth is not None:
             items.append((T.TRUTH, _TRUTH(truth)))
+        if disturbance is not None:
+            items.append((T.DISTURBANCE, _DISTURBANCE(disturbance)))
         return items
 
 
 _STATE, _ERROR, _COMMAND = FIXED[T.STATE].encode, FIXED[T.ERROR].encode, FIXED[T.COMMAND].encode
 _LIMITED, _COST, _TRUTH = FIXED[T.COMMAND_LIMITED].encode, FIXED[T.COST].encode, FIXED[T.TRUTH].encode
+_DISTURBANCE = FIXED[T.DISTURBANCE].encode

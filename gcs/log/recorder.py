@@ -178,10 +178,12 @@ class FlightRecorder:
                               fields.pop("flight", 0), fields.pop("run", 0), fields.pop("seed", None), cost, fields))
 
     def tick(self, t_ns: int, k: int, state: Sequence[float], ref: Sequence[float], command: Sequence[float],
-             sent: Sequence[float], steps_to_go: int, mode: str, timing: LoopTiming | tuple) -> None:
+             sent: Sequence[float], steps_to_go: int, mode: str, timing: LoopTiming | tuple,
+             disturbance: Sequence[float] | None = None) -> None:
         """One control tick; committed with its frames every :data:`TICKS_PER_COMMIT` ticks.
 
-        ``timing``: a :class:`~gcs.log.records.LoopTiming` (or, for now, the same 8 numbers as a tuple).
+        ``timing``: a :class:`~gcs.log.records.LoopTiming` (or, for now, the same 8 numbers as a tuple);
+        ``disturbance``: the observer's estimate (:data:`gcs.log.topics.DISTURBANCE_FIELDS`), None without one.
         """
         if self.sink is None:
             return
@@ -190,7 +192,8 @@ class FlightRecorder:
                                 f"got {len(timing)}"))
             return
         self._items.append((_TICK, self._t(t_ns), k, tuple(state), tuple(ref), tuple(command), tuple(sent),
-                            steps_to_go, mode, tuple(timing), None))
+                            steps_to_go, mode, tuple(timing), None,
+                            None if disturbance is None else tuple(disturbance)))
         self._ticks += 1
         if self._ticks >= TICKS_PER_COMMIT:
             self._ticks = 0

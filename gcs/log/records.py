@@ -90,8 +90,9 @@ class FlightStart(NamedTuple):
 
 class Tick(NamedTuple):
     """One control tick: the estimate, reference, command before and after the safety envelope
-    (``command_limited`` None: no envelope), the horizon step and mode, the loop timing and, in
-    simulation, the true state (``/control/*``, ``/loop/timing``, ``/sim/truth``)."""
+    (``command_limited`` None: no envelope), the horizon step and mode, the loop timing, in
+    simulation the true state, and with a disturbance observer its estimate (``/control/*``,
+    ``/loop/timing``, ``/sim/truth``; ``disturbance`` in :data:`gcs.log.topics.DISTURBANCE_FIELDS` order)."""
 
     t_ns: int
     k: int
@@ -103,6 +104,7 @@ class Tick(NamedTuple):
     mode: str
     timing: LoopTiming | None = None
     truth: Sequence[float] | None = None
+    disturbance: Sequence[float] | None = None
 
 
 class TickBlock(NamedTuple):

@@ -23,6 +23,8 @@ __all__ = [
     "COMMAND_LIMITED",
     "COST",
     "COST_FIELDS",
+    "DISTURBANCE",
+    "DISTURBANCE_FIELDS",
     "ERROR",
     "EVENTS",
     "FIXED_FIELDS",
@@ -66,6 +68,7 @@ COMMAND = "/control/command"
 COMMAND_LIMITED = "/control/command_limited"
 HORIZON = "/control/horizon"
 COST = "/control/cost"
+DISTURBANCE = "/control/disturbance"
 TRUTH = "/sim/truth"
 SIM_METRICS = "/sim/metrics"
 FLIGHT_METRICS = "/flight/metrics"
@@ -109,12 +112,15 @@ HORIZON_FIELDS = ("k", "steps_to_go", "mode")
 TIMING_FIELDS = ("jitter_s", "tick_s", "deadline_missed", "decode_s", "estimate_s", "control_s", "send_s",
                  "log_prev_s")
 COST_FIELDS = ("state_cost", "input_cost", "stage_cost")
+#: ``/control/disturbance``: the disturbance observer's estimate (gcs.estimate.DisturbanceObserver).
+DISTURBANCE_FIELDS = ("dx_m_s2", "dy_m_s2", "dz_m_s2", "velocity_bias_x_m_s", "velocity_bias_y_m_s",
+                      "velocity_bias_z_m_s")
 
 #: Topics whose messages always carry exactly these numeric fields, in this order
 #: (formatted through the templates of :mod:`gcs.log.jsonfmt`).
 FIXED_FIELDS: dict[str, tuple[str, ...]] = {
     STATE: STATE_FIELDS, REFERENCE: STATE_FIELDS, ERROR: STATE_FIELDS, TRUTH: STATE_FIELDS,
-    COMMAND: COMMAND_FIELDS, COMMAND_LIMITED: COMMAND_FIELDS, COST: COST_FIELDS,
+    COMMAND: COMMAND_FIELDS, COMMAND_LIMITED: COMMAND_FIELDS, COST: COST_FIELDS, DISTURBANCE: DISTURBANCE_FIELDS,
 }
 
 
@@ -153,6 +159,12 @@ _SCHEMAS: dict[str, tuple[str, dict]] = {
                                  "(eq. 5 for LOC, eq. 17 for NLSOC), each with the factor 1/2", _numbers(
                                      COST_FIELDS, ("1/2 x'Qx", "1/2 u'Ru", "state_cost + input_cost")),
                                  COST_FIELDS)),
+    DISTURBANCE: ("gcs.Disturbance", _obj(
+        "Disturbance estimate", "The disturbance observer's estimate at this tick (paper frame, z up): the "
+        "acceleration eq. 1 misses (linear drag at the estimated velocity plus the learnt steady part; the laws "
+        "compensate it, less the reference's acceleration) and the offset taken off the velocity readings",
+        _numbers(DISTURBANCE_FIELDS, ("[m/s^2, north]", "[m/s^2, east]", "[m/s^2, up]", "[m/s, north]",
+                                      "[m/s, east]", "[m/s, up]")), DISTURBANCE_FIELDS)),
     TIMING: ("gcs.LoopTiming", _obj("Loop timing", "One control tick's timing [s]", {
         "k": {"type": "integer"},
         "jitter_s": {"type": "number", "description": "tick start minus its deadline [s]"},

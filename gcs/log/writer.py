@@ -85,18 +85,18 @@ class FlightLog(McapWriter):
                      command: Sequence[float], command_limited: Sequence[float] | None = None,
                      k: int | None = None, steps_to_go: int = 0, mode: str = "horizon",
                      cost: Sequence[float] | None = None, truth: Sequence[float] | None = None,
-                     error: bool = True) -> None:
+                     error: bool = True, disturbance: Sequence[float] | None = None) -> None:
         """Everything of one control tick, under one lock.
 
         Writes ``/control/state``, ``/control/reference``, ``/control/error`` (reference - state,
         yaw wrapped; unless ``error=False``), ``/control/command``, and when given
         ``/control/command_limited``, ``/control/horizon`` (``k`` given), ``/control/cost``
-        (state_cost, input_cost, stage_cost) and ``/sim/truth``.
+        (state_cost, input_cost, stage_cost), ``/sim/truth`` and ``/control/disturbance``.
         """
         text = self._ticks
         err = tracking_error(reference, state) if error else None
         self.add(text.items(state, text.reference(reference), err, command, command_limited, k, steps_to_go, mode,
-                            cost, truth), log_time_ns)
+                            cost, truth, disturbance), log_time_ns)
 
     def horizon_json(self, k: int, steps_to_go: int, mode: str) -> bytes:
         """The ``/control/horizon`` message."""

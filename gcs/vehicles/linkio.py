@@ -28,12 +28,15 @@ class LinkIO:
     event : callable (kind, text)
     safe_command : callable () -> message
         What goes instead of a blocked command.
+    on_batch : callable (list) or None
+        Sees each drained batch before ``handle`` takes its messages.
     """
 
     def __init__(self, link: Any, handle: Callable[[Any], None], event: Callable[[str, str], None],
-                 safe_command: Callable[[], Any]) -> None:
+                 safe_command: Callable[[], Any], on_batch: Callable[[list], None] | None = None) -> None:
         self.link = link
         self.handle = handle
+        self.on_batch = on_batch
         self.event = event
         self.safe_command = safe_command
         #: ``("unsafe_command", "")`` once the guard blocked a command (the event already said why).
@@ -47,6 +50,8 @@ class LinkIO:
         except LinkError as exc:
             self.failed(exc)
             return 0
+        if self.on_batch is not None and msgs:
+            self.on_batch(msgs)
         for m in msgs:
             self.handle(m)
         return len(msgs)

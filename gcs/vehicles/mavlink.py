@@ -113,7 +113,7 @@ class MavlinkSession:
         self.adapter: OutputAdapter | None = None
         self.params: VehicleParams | None = None
         self.ctx: FlightContext | None = None
-        self.io = LinkIO(link, self.handle, self.event, self._safe_command)
+        self.io = LinkIO(link, self.handle, self.event, self._safe_command, on_batch=self._backlog)
         self.armed_sent = False
         #: The preflight found the vehicle ready (its streams flowing): from then on they are watched.
         self.ready = False
@@ -154,6 +154,17 @@ class MavlinkSession:
     def pump(self) -> int:
         """Drain the link into the telemetry (never blocks); the number of messages."""
         return self.io.pump()
+
+    def _backlog(self, msgs: list) -> None:
+        """A drained batch, before the telemetry takes it: one that holds more than the observer's reading
+        gap of positions is a backlog (the loop or the link stalled), which the disturbance observer must
+        not take for motion within one step (:meth:`gcs.estimate.DisturbanceObserver.restart`)."""
+        obs = self.estimator.disturbance
+        if obs is None:
+            return
+        limit = max(3, round(obs.reading_gap_s * self.config.flight.telemetry_rate_hz))
+        if sum(1 for m in msgs if m.get_type() == "LOCAL_POSITION_NED") > limit:
+            obs.restart()
 
     def send_message(self, msg) -> None:
         """Send ``msg`` through the output guard (a blocked one: the safe command, and fail safe)."""
@@ -269,6 +280,10 @@ class MavlinkSession:
     def disturbance_m_s2(self) -> tuple[float, float, float]:
         """The acceleration eq. 1 misses, as the estimator's observer has it (zeros without one)."""
         return self.estimator.disturbance_m_s2()
+
+    def observer_log(self) -> tuple[float, float, float, float, float, float] | None:
+        obs = self.estimator.disturbance
+        return None if obs is None else (*self.estimator.disturbance_m_s2(), *obs.velocity_bias)
 
     def disarm_on_ground(self) -> None:
         """After a preflight refusal that came after the arm command: disarm (the vehicle is on the ground).

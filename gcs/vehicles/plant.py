@@ -89,6 +89,9 @@ class PlantSession:
         """None estimated: the simulation flies the paper's laws as they are."""
         return _CALM
 
+    def observer_log(self) -> None:
+        return None
+
     def fresh(self, now_ns: int, stale_s: float) -> bool:
         return True
 

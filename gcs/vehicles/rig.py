@@ -250,6 +250,9 @@ class RigSession:
         """None estimated: the rig flies the paper's laws as they are."""
         return (0.0, 0.0, 0.0)
 
+    def observer_log(self) -> None:
+        return None
+
     def fresh(self, now_ns: int, stale_s: float) -> bool:
         return self.tel.fresh(now_ns, stale_s)
 
