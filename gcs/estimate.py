@@ -208,7 +208,8 @@ class DisturbanceObserver:
         """Run the low-passes of the readings over the ``dt_s`` [s] since the last call: per axis, once a
         new position reading has come, over the time since the one before; update ``b``."""
         tau, lim = self.velocity_bias_time_constant_s, self.max_velocity_bias_m_s
-        self._hold = [False, False, False]
+        hold = self._hold  # in place: no list per tick on the 100 Hz path
+        hold[0] = hold[1] = hold[2] = False
         for i, (p, v) in enumerate(self._read):
             if not self._new[i]:  # nothing new: the offset held, the time counted
                 self._since[i] += dt_s
