@@ -38,7 +38,8 @@ ABSENT = {
         "telemetry_rate_hz": 100.0, "telemetry_stale_s": 0.3, "max_tilt_deg": 35.0, "fence_half_width_m": 20.0,
         "ceiling_m": 10.0, "rate_gain_1_s": [65.0, 65.0, 80.0], "inertia_kg_m2": [0.01, 0.01, 0.018],
         "max_torque_nm": [1.9, 1.9, 0.2], "position_std_m": 0.05, "velocity_std_m_s": 0.05,
-        "landing_speed_m_s": 0.5, "min_battery_v": 10.5, "land_timeout_s": 30.0}.items()},
+        "landing_speed_m_s": 0.5, "min_battery_v": 10.5, "land_timeout_s": 30.0,
+        "rate_integral_max_rad": [0.1, 0.1, 0.2], "rate_response_s": 0.04}.items()},
 }
 
 

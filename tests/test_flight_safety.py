@@ -278,7 +278,7 @@ def test_a_non_finite_controller_output_is_never_sent():
 
 def test_the_output_guard_replaces_a_bad_setpoint_and_fails_safe():
     def hook(flight):
-        def bad_fields(state, cmd, _orig=None):
+        def bad_fields(state, cmd, **_kw):
             return {"message": "SET_ATTITUDE_TARGET", "type_mask": 0, "q": [math.nan, 0.0, 0.0, 0.0],
                     "body_rates": [0.0, 0.0, 0.0], "thrust": 0.4}
 
@@ -287,8 +287,8 @@ def test_the_output_guard_replaces_a_bad_setpoint_and_fails_safe():
         def preflight():
             orig_preflight()
             fields = flight.session.adapter.fields
-            flight.session.adapter.fields = (lambda state, cmd: bad_fields(state, cmd) if flight.stats.ticks >= 250
-                                             else fields(state, cmd))
+            flight.session.adapter.fields = (lambda state, cmd, *a, **kw: bad_fields(state, cmd)
+                                             if flight.stats.ticks >= 250 else fields(state, cmd, *a, **kw))
         flight.preflight = preflight
 
     result, snap, uplink, params = fly_through(flight_hook=hook)

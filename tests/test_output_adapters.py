@@ -203,3 +203,90 @@ def test_a_stalled_rates_setpoint_turns_for_the_guided_timeout_only():
     f = a.fields(State(z=1.5, roll_rate=0.05), Command(9.81, 1.3, 0.0, 0.0))
     assert math.degrees(math.hypot(*f["body_rates"]) * 0.5) < 3.0
 
+
+
+# ---------------------------------------------------------------------- the rate-error integral (issue 26)
+
+class YawAutopilot:
+    """One axis of an autopilot flying the attitude output: the angle P (K_a) on the target's yaw error,
+    a rate loop ``w' = k (w_cmd - w) + d`` (``d``: a steady torque the model lacks, as a weak motor gives)
+    with a slow integrator of its own (``ki``, ArduCopter's ATC_RAT_YAW_I is tens of seconds), at 400 Hz."""
+
+    def __init__(self, disturbance=0.0, k=12.0, ki=0.0):
+        self.yaw, self.w, self.i = 0.0, 0.0, 0.0
+        self.d, self.k, self.ki = disturbance, k, ki
+
+    def run(self, q_target, seconds=0.01, dt=0.0025):
+        target = math.atan2(2 * (q_target[0] * q_target[3] + q_target[1] * q_target[2]),
+                            1 - 2 * (q_target[2] ** 2 + q_target[3] ** 2))
+        for _ in range(int(round(seconds / dt))):
+            err = 4.5 * (target - self.yaw) - self.w
+            self.i += self.ki * err * dt
+            self.w += dt * (self.k * err + self.i + self.d)
+            self.yaw += dt * self.w
+
+
+def fly_yaw_rate(adapter, plant, rate_rad_s, seconds, airborne=True):
+    """The law demands ``rate_rad_s`` of yaw rate (tau = K_d (rate - w): omega_d = rate); the yaw rates flown."""
+    rates = []
+    for _ in range(int(round(seconds / 0.01))):
+        s = State(z=1.5, yaw=plant.yaw, yaw_rate=plant.w)
+        f = adapter.fields(s, Command(9.81, 0.0, 0.0, 80.0 * (rate_rad_s - plant.w)), airborne)
+        plant.run(f["q"])
+        rates.append(plant.w)
+    return rates
+
+
+def integral_model(**kw):
+    return model("attitude", angle_accel_limit_rad_s2=ARDUCOPTER_LIMITS, rate_integral_max_rad=(0.1, 0.1, 0.2), **kw)
+
+
+def test_a_steady_torque_leaves_the_rate_short_without_the_integral_and_not_with_it():
+    """The weak-motor defect: re-anchored on the measured attitude every period, the angle loop is a pure
+    proportional rate loop; a steady torque the autopilot's own integrator has not learnt leaves the rate
+    short of the demand.  The rate-error integral brings it to the demand within a second."""
+    without = fly_yaw_rate(OutputAdapter(model("attitude", angle_accel_limit_rad_s2=ARDUCOPTER_LIMITS), MAV),
+                           YawAutopilot(disturbance=-1.0), 0.1, 5.0)
+    assert without[-1] < 0.1 - 0.05                       # steady shortfall (0.1 - w = d / (k (1 + ...)))
+    a = OutputAdapter(integral_model(), MAV)
+    with_it = fly_yaw_rate(a, YawAutopilot(disturbance=-1.0), 0.1, 5.0)
+    assert with_it[-1] == pytest.approx(0.1, abs=0.005)
+    assert max(abs(w - 0.1) for w in with_it[200:]) < 0.01   # settled after 2 s
+    assert 0.0 < a.integral.delta_rad[2] < 0.2
+
+
+def test_the_integral_stays_near_zero_on_a_nominal_vehicle():
+    """No disturbance, a rate loop that lags as ArduCopter's (k = 25 1/s): transients of the demand leave
+    ``delta`` small, so the nominal flight is the one the law designed."""
+    a = OutputAdapter(integral_model(), MAV)
+    plant = YawAutopilot(k=25.0)
+    for rate in (0.3, -0.2, 0.0):
+        fly_yaw_rate(a, plant, rate, 1.0)
+        assert abs(a.integral.delta_rad[2]) < 0.01
+
+
+def test_the_integral_is_bounded_learns_only_airborne_and_restarts_after_level_setpoints():
+    a = OutputAdapter(integral_model(), MAV)
+    fly_yaw_rate(a, YawAutopilot(disturbance=-50.0), 0.1, 3.0)        # past the vehicle's authority
+    assert a.integral.delta_rad[2] == pytest.approx(-0.2) or a.integral.delta_rad[2] == pytest.approx(0.2)
+    fly_yaw_rate(a, YawAutopilot(), 0.0, 3.0, airborne=False)          # on the ground: relaxes, learns nothing
+    assert abs(a.integral.delta_rad[2]) < 0.2 * math.exp(-5.0)
+    fly_yaw_rate(a, YawAutopilot(disturbance=-1.0), 0.1, 1.0)
+    assert a.integral.delta_rad[2] != 0.0
+    a.level(State(yaw=0.1), 9.81, 0)
+    assert a.integral.delta_rad == [0.0, 0.0, 0.0]
+
+
+def test_the_integral_is_configured_from_the_flight_section_and_off_with_zero_bounds():
+    cfg = load_config("outdoor-circle")
+    out = OutputParams(0.39, (4.5, 4.5, 4.5), ARDUCOPTER_LIMITS, (0.0, 0.0, 0.0), output="attitude")
+    a = build_adapter("attitude", cfg.vehicle, cfg.flight, out, 0.01, MAV, 1, 1)
+    assert a.integral is not None and a.integral.max_rad == cfg.flight.rate_integral_max_rad == (0.1, 0.1, 0.2)
+    assert build_adapter("rates", cfg.vehicle, cfg.flight, out, 0.01, MAV, 1, 1).integral is None
+    off = cfg.with_changes("flight", rate_integral_max_rad=[0.0, 0.0, 0.0])
+    assert build_adapter("attitude", off.vehicle, off.flight, out, 0.01, MAV, 1, 1).integral is None
+    from quadrotor.errors import ConfigError
+    with pytest.raises(ConfigError, match=r"flight\.rate_integral_max_rad"):
+        cfg.with_changes("flight", rate_integral_max_rad=[0.1, 0.1, 0.9])
+    with pytest.raises(ConfigError, match=r"flight\.rate_response_s"):
+        cfg.with_changes("flight", rate_response_s=0.0)

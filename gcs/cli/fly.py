@@ -36,7 +36,8 @@ def add_fly_parser(sub) -> None:
                     "--port nor --connect it flies the built-in SITL on loopback. Exit codes: 0 completed, "
                     "2 bad config/option, 3 telemetry lost, 4 geofence, 5 interrupted (landed), 6 link error, "
                     "7 preflight refused, 8 immediate LAND (second Ctrl-C), 9 the vehicle left guided control, "
-                    "10 unsafe command caught before the wire, 11 internal error, 12 telemetry too slow.")
+                    "10 unsafe command caught before the wire, 11 internal error, 12 telemetry too slow, "
+                    "13 a fault past the vehicle's authority (landed).")
     f.add_argument("--controller", default="nlsoc", choices=CONTROLLERS, help="controller (default nlsoc)")
     f.add_argument("--config", default=None,
                    help=f"experiment config, path or bundled name (default {DEFAULT_CONFIG}; "

@@ -235,11 +235,12 @@ def _flight(f: Reader) -> FlightConfig:
     out = FlightConfig(
         output=f.string("output", d.output, choices=("attitude", "rates", "actuator")),
         rate_gain_1_s=f.vector("rate_gain_1_s", d.rate_gain_1_s, rpy),  # type: ignore[arg-type]
+        rate_integral_max_rad=f.vector("rate_integral_max_rad", d.rate_integral_max_rad, rpy),  # type: ignore[arg-type]
         inertia_kg_m2=f.vector("inertia_kg_m2", d.inertia_kg_m2, rpy),  # type: ignore[arg-type]
         max_torque_nm=f.vector("max_torque_nm", d.max_torque_nm, rpy),  # type: ignore[arg-type]
         **{k: f.number(k, getattr(d, k)) for k in (
-            "telemetry_rate_hz", "telemetry_stale_s", "max_tilt_deg", "fence_half_width_m", "ceiling_m",
-            "position_std_m", "velocity_std_m_s", "landing_speed_m_s", "min_battery_v", "land_timeout_s")},
+            "telemetry_rate_hz", "telemetry_stale_s", "rate_response_s", "max_tilt_deg", "fence_half_width_m",
+            "ceiling_m", "position_std_m", "velocity_std_m_s", "landing_speed_m_s", "min_battery_v", "land_timeout_s")},
     )
     messages = out.telemetry_rate_hz * out.telemetry_stale_s
     if messages < MIN_STALE_MESSAGES * (1 - 1e-9):

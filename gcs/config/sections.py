@@ -191,6 +191,14 @@ class FlightConfig:
         (:mod:`gcs.vehicles.output`), roll/pitch/yaw [1/s]: the controllers' own rate damping
         (65, 65, 80) makes the demand the rate their attitude loops settle to, which the
         autopilot's rate loop realises whatever its own gain and delay.
+    rate_integral_max_rad : (3,) float
+        The attitude output's rate-error integral (:class:`gcs.vehicles.output.RateErrorIntegral`), roll/pitch/
+        yaw [rad]: the largest attitude offset it may add to the target (0: off on that axis).  It makes the
+        autopilot realise the rate demand against a steady torque (a weak motor, an off-centre payload) that
+        its own rate-loop integrator learns slowly.
+    rate_response_s : float
+        The time constant the autopilot's rate loop is modelled to follow the demand with (first order, after
+        one control period), which the integral compares the measured rate against.
     inertia_kg_m2, max_torque_nm : (3,) float
         For the actuator output: torque = I alpha, normalised by the maximum torque.
     position_std_m, velocity_std_m_s : float
@@ -210,6 +218,8 @@ class FlightConfig:
     fence_half_width_m: float = 20.0
     ceiling_m: float = 10.0
     rate_gain_1_s: tuple[float, float, float] = (65.0, 65.0, 80.0)
+    rate_integral_max_rad: tuple[float, float, float] = (0.1, 0.1, 0.2)
+    rate_response_s: float = 0.04
     inertia_kg_m2: tuple[float, float, float] = (0.010, 0.010, 0.018)
     max_torque_nm: tuple[float, float, float] = (1.949, 1.949, 0.196)
     position_std_m: float = 0.05

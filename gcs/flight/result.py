@@ -17,6 +17,9 @@ code  exit_reason        what happened
 11    internal_error     an exception in the ground station while flying: landing
 12    telemetry_slow     the streams the controller flies on stayed too slow (after
                          asking for them again): landing
+13    out_of_authority   a fault past the vehicle's authority (thrust at its top for 1 s,
+                         the attitude output's rate correction at its bound for 2 s):
+                         landing (:mod:`gcs.vehicles.authority`)
 ====  =================  ==========================================================
 
 Whatever ends the flight, the vehicle is landed and disarmed (or left to the pilot, 9),
@@ -33,7 +36,8 @@ __all__ = ["EXIT_CODES", "FlightResult"]
 
 EXIT_CODES = {"completed": 0, "telemetry_lost": 3, "geofence": 4, "interrupted": 5, "link_error": 6,
               "preflight_refused": 7, "immediate_land": 8, "vehicle_took_over": 9, "unsafe_command": 10,
-              "internal_error": 11, "telemetry_slow": 12}
+              "internal_error": 11, "telemetry_slow": 12,
+              "out_of_authority": 13}
 
 
 @dataclass

@@ -100,7 +100,8 @@ class ArduCopterSitl(FirmwareChild):
     speedup : float
         Simulated seconds per wall second (``--speedup``).
     model : str
-        ArduPilot's frame model (``x``, ``quad`` = + frame, ...).
+        ArduPilot's frame model (``x``, ``quad`` = + frame, ...; ``x:/path/frame.json`` with the frame's
+        values, e.g. its mass, from a JSON file).
     workdir : path-like or None
         Where it runs (None: a new temporary directory, removed by :meth:`stop`).
     defaults : sequence of path-like or None
@@ -117,7 +118,8 @@ class ArduCopterSitl(FirmwareChild):
         self.workdir = Path(tempfile.mkdtemp(prefix="gcs-arducopter-") if workdir is None else workdir)
         if defaults is None:
             here = self.binary.parent
-            defaults = [p for p in (here / "copter.parm", here / f"frame-{model}.parm") if p.is_file()]
+            frame = model.split(":", 1)[0]  # "x:frame.json": the X frame with a JSON file's values
+            defaults = [p for p in (here / "copter.parm", here / f"frame-{frame}.parm") if p.is_file()]
         self.defaults = [Path(d) for d in defaults]
         self.instance: int | None = None
         self.proc: subprocess.Popen | None = None

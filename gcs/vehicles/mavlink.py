@@ -28,6 +28,7 @@ from gcs.flight.context import FlightContext
 from gcs.link.guard import GuardLimits, OutputGuard, UnsafeCommand
 from gcs.link.mavlink import LinkError, MavlinkLink
 from gcs.vehicles.ardupilot import ArduPilotProfile
+from gcs.vehicles.authority import AuthorityWatch
 from gcs.vehicles.firmware import Firmware
 from gcs.vehicles.linkio import LinkIO
 from gcs.vehicles.output import OutputAdapter, build_adapter
@@ -47,6 +48,9 @@ MIN_RATE_FRACTION = 0.25
 #: How long after its setpoint-loss time a vehicle has surely taken over [s]: PX4 SITL on a loaded
 #: 2-core machine showed Land 1.05 s after our setpoints stopped, with COM_OF_LOSS_T = 0.5 s.
 FAILSAFE_REACTION_S = 0.6
+#: Height above the mission's start [m] from which the vehicle counts as airborne (the output's rate-error
+#: integral learns only then).
+AIRBORNE_M = 0.05
 STREAM_IDS = {"ATTITUDE": mavlink.MAVLINK_MSG_ID_ATTITUDE,
               "LOCAL_POSITION_NED": mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED}
 
@@ -111,6 +115,7 @@ class MavlinkSession:
         self.streams = StreamMonitor({"ATTITUDE": rate, "LOCAL_POSITION_NED": rate},
                                      min_rate_hz=MIN_RATE_FRACTION * rate)
         self.adapter: OutputAdapter | None = None
+        self.authority: AuthorityWatch | None = None
         self.params: VehicleParams | None = None
         self.ctx: FlightContext | None = None
         self.io = LinkIO(link, self.handle, self.event, self._safe_command, on_batch=self._backlog)
@@ -120,6 +125,7 @@ class MavlinkSession:
         self._gone_checked = 0
         #: The vehicle's time [ms] (its telemetry's ``time_boot_ms``) at our last setpoint (None before the first).
         self._last_setpoint_ms: int | None = None
+        self._ground_z: float | None = None
 
     # ------------------------------------------------------------------ wiring and I/O
     def attach(self, ctx: FlightContext) -> None:
@@ -262,6 +268,7 @@ class MavlinkSession:
         link = self.link
         self.adapter = build_adapter(self.output_kind, self.model, self.config.flight, out, self.period_s, link.mav,
                                      link.target_system, link.target_component)
+        self.authority = AuthorityWatch(self.period_s)
         est = self.config.estimator
         observe = est.disturbance == "on" or (est.disturbance == "auto" and not self.firmware.builtin_sitl)
         tau = est.disturbance_time_constant_s
@@ -321,6 +328,9 @@ class MavlinkSession:
         return self.io.fault
 
     def health(self, now_ns: int) -> tuple[str, str] | None:
+        past = self.authority.failure() if self.authority is not None else None
+        if past is not None:
+            return "out_of_authority", past
         failure = self._watch_streams(now_ns)
         return None if failure is None else ("telemetry_slow", failure)
 
@@ -344,10 +354,15 @@ class MavlinkSession:
                 f"{self.profile.name}'s failsafe has it")
 
     def mission_origin(self, state: State) -> tuple[float, float, float]:
+        self._ground_z = state.z
         return (state.x, state.y, state.z)
 
     def send(self, state: State, command: Command) -> None:
-        fields = self.adapter.fields(state, command)  # type: ignore[union-attr]
+        airborne = self._ground_z is None or state.z > self._ground_z + AIRBORNE_M
+        fields = self.adapter.fields(state, command, airborne)  # type: ignore[union-attr]
+        integral = self.adapter.integral  # type: ignore[union-attr]
+        self.authority.update(fields, airborne, None if integral is None else integral.delta_rad,  # type: ignore[union-attr]
+                              None if integral is None else integral.max_rad)
         boot_ms = self.telemetry.status.time_boot_ms
         self.send_message(self.adapter.encode(fields, boot_ms))  # type: ignore[union-attr]
         self._last_setpoint_ms = boot_ms
@@ -435,7 +450,8 @@ class MavlinkSession:
                 "telemetry_rejected": dict(self.telemetry.validator.rejected),
                 "stream_rates_hz": dict(self.streams.rates_hz), "stream_rerequests": self.streams.rerequests,
                 "timesync_rtt_ms": self.telemetry.timesync_rtt_ms,
-                "timesync_rtt_median_ms": float(np.median(samples)) if samples else None}
+                "timesync_rtt_median_ms": float(np.median(samples)) if samples else None,
+                "vehicle_clock_rate": self.telemetry.time_map.rate}
 
     def loop_summary(self) -> dict:
         clock = self.ctx.clock if self.ctx is not None else None

@@ -34,6 +34,24 @@ autopilot's rate limits (ATC_RATE_R/P/Y_MAX, where set).  Then, per ``--output``
   GUID_TIMEOUT levels it.  Non-zero rates would instead be integrated into the stored target
   until GUID_TIMEOUT (ArduCopter) and, with ATC_RATE_FF_ENAB = 1, be ignored as feed-forward.
 
+  **The rate-error integral** (:class:`RateErrorIntegral`).  Each setpoint is anchored on the measured
+  attitude, so the angle loop alone is a proportional rate loop around it: a steady torque the model
+  does not have (a weak motor, an off-centre payload, a trim) leaves the rate short of ``omega_d`` until
+  the autopilot's own rate integrator has learnt it — ArduCopter's yaw one (ATC_RAT_YAW_I 0.02) takes
+  tens of seconds, and a 15 % weak motor then held the yaw 11 deg off for 30 s and the circle 0.5 m
+  off.  So, as ArduCopter does with a rate input (its target integrates the rate), the shortfall is
+  integrated into the target::
+
+      delta += Ts (omega_m - omega),   omega_m = the demand through the modelled rate response
+      e_i    = S_i^-1(omega_d,i) + delta_i
+
+  ``omega_m`` is ``omega_d`` one period later through a first-order lag of ``[flight] rate_response_s``
+  (0.04 s: ArduCopter SITL's measured rate follows the demand so), so a nominal vehicle's transients
+  leave ``delta`` near 0.  The angle loop turns ``delta`` into ``K_a delta`` of extra rate: an integral
+  on the rate error with gain ``K_a``.  ``|delta_i|`` is bounded by ``[flight] rate_integral_max_rad``
+  (0.1, 0.1, 0.2 rad; 0 turns an axis off); it integrates only in the air (the estimate above the
+  mission's start), relaxes on the ground over 0.5 s and restarts after level setpoints.
+
 ``rates`` — SET_ATTITUDE_TARGET, type_mask = 128 (attitude ignored), body rates = ``omega_d``;
   the quaternion is the current attitude (ArduPilot rejects non-unit quaternions even when
   ignored).  ArduCopter (ATC_RATE_FF_ENAB = 1) shapes the rate with ACRO_RP_RATE_TC and tracks
@@ -66,13 +84,15 @@ from dataclasses import dataclass
 from quadrotor.frames import euler_accel_to_body_accel, euler_rates_to_body_rates, euler_to_quaternion, quat_multiply
 from quadrotor.state import Command, State
 
-__all__ = ["OutputModel", "OutputAdapter", "OUTPUTS", "build_adapter", "angle_for_rate", "rotation_quaternion",
-           "IGNORE_RATES", "IGNORE_ATTITUDE"]
+__all__ = ["OutputModel", "OutputAdapter", "RateErrorIntegral", "OUTPUTS", "build_adapter", "angle_for_rate",
+           "rotation_quaternion", "IGNORE_RATES", "IGNORE_ATTITUDE"]
 
 OUTPUTS = ("attitude", "rates", "actuator")
 IGNORE_RATES = 1 | 2 | 4
 IGNORE_ATTITUDE = 128
 _ZERO = (0.0, 0.0, 0.0)
+#: Time constant of the integral's relaxation on the ground [s] (ArduCopter relaxes its I terms over 0.5 s).
+GROUND_RELAX_S = 0.5
 
 
 def rotation_quaternion(v) -> tuple[float, float, float, float]:
@@ -94,6 +114,56 @@ def angle_for_rate(rate_rad_s: float, gain_1_s: float, accel_limit_rad_s2: float
         return rate_rad_s / gain_1_s
     a = accel_limit_rad_s2
     return math.copysign(rate_rad_s * rate_rad_s / (2.0 * a) + a / (2.0 * gain_1_s * gain_1_s), rate_rad_s)
+
+
+class RateErrorIntegral:
+    """The attitude output's integral of the rate shortfall (module docstring), per FRD body axis.
+
+    Parameters
+    ----------
+    ts_s : float
+        The control period (one :meth:`update` per period).
+    response_s : float
+        Time constant of the modelled rate response ``omega_m`` to the demand.
+    max_rad : (3,) float
+        Bound of ``|delta|`` per axis [rad] (0: that axis off).
+    """
+
+    __slots__ = ("ts_s", "max_rad", "_a", "_relax", "model_rad_s", "delta_rad")
+
+    def __init__(self, ts_s: float, response_s: float, max_rad) -> None:
+        if not (ts_s > 0.0 and response_s > 0.0) or len(max_rad) != 3 or min(max_rad) < 0.0:
+            raise ValueError(f"need ts_s > 0, response_s > 0 and three bounds >= 0, got {ts_s!r}, {response_s!r}, "
+                             f"{max_rad!r}")
+        self.ts_s = ts_s
+        self.max_rad = tuple(float(m) for m in max_rad)
+        self._a = ts_s / (response_s + ts_s)
+        self._relax = min(1.0, ts_s / GROUND_RELAX_S)
+        self.model_rad_s = [0.0, 0.0, 0.0]
+        self.delta_rad = [0.0, 0.0, 0.0]
+
+    def reset(self, omega=_ZERO) -> None:
+        """Start again from no offset, the modelled rate at ``omega`` [rad/s]."""
+        self.model_rad_s = [float(w) for w in omega]
+        self.delta_rad = [0.0, 0.0, 0.0]
+
+    def update(self, omega, airborne: bool) -> list[float]:
+        """One period: ``delta`` after the measured body rate ``omega`` [rad/s] (before this period's demand)."""
+        d, m, h = self.delta_rad, self.model_rad_s, self.ts_s
+        for i in range(3):
+            lim = self.max_rad[i]
+            if airborne and lim > 0.0:
+                v = d[i] + h * (m[i] - omega[i])
+                d[i] = lim if v > lim else -lim if v < -lim else v
+            else:
+                d[i] -= self._relax * d[i]
+        return d
+
+    def demanded(self, demand) -> None:
+        """The rate demand sent this period: the model's input for the next one."""
+        m, a = self.model_rad_s, self._a
+        for i in range(3):
+            m[i] += a * (demand[i] - m[i])
 
 
 @dataclass(frozen=True)
@@ -119,6 +189,10 @@ class OutputModel:
         The autopilot's rate limits (0: none).
     ts_s : float
         The control period (the attitude setpoint leads by it).
+    rate_integral_max_rad : (3,) float
+        The attitude output's rate-error integral bounds (all 0: no integral).
+    rate_response_s : float
+        Its modelled rate-response time constant.
     """
 
     kind: str
@@ -132,6 +206,8 @@ class OutputModel:
     angle_accel_limit_rad_s2: tuple[float, float, float] = (0.0, 0.0, 0.0)
     rate_limit_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
     ts_s: float = 0.01
+    rate_integral_max_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rate_response_s: float = 0.04
 
     def __post_init__(self) -> None:
         if self.kind not in OUTPUTS:
@@ -141,7 +217,7 @@ class OutputModel:
         for name in ("inertia_kg_m2", "max_torque_nm", "rate_gain_1_s", "angle_gain_1_s"):
             if len(getattr(self, name)) != 3 or min(getattr(self, name)) <= 0:
                 raise ValueError(f"{name} must be three positive numbers, got {getattr(self, name)!r}")
-        for name in ("angle_accel_limit_rad_s2", "rate_limit_rad_s"):
+        for name in ("angle_accel_limit_rad_s2", "rate_limit_rad_s", "rate_integral_max_rad"):
             if len(getattr(self, name)) != 3 or min(getattr(self, name)) < 0:
                 raise ValueError(f"{name} must be three numbers >= 0, got {getattr(self, name)!r}")
 
@@ -159,6 +235,9 @@ class OutputAdapter:
         self.mav = mav
         self.target_system = target_system
         self.target_component = target_component
+        #: The rate-error integral of the attitude output (None: none).
+        self.integral = (RateErrorIntegral(model.ts_s, model.rate_response_s, model.rate_integral_max_rad)
+                         if model.kind == "attitude" and max(model.rate_integral_max_rad) > 0.0 else None)
 
     def body_accel(self, state: State, cmd: Command) -> tuple[float, float, float]:
         """FRD body angular acceleration [rad/s^2] for the command's Euler-angle accelerations."""
@@ -174,8 +253,8 @@ class OutputAdapter:
             out.append(v if lim <= 0.0 else lim if v > lim else -lim if v < -lim else v)
         return out
 
-    def fields(self, state: State, cmd: Command) -> dict:
-        """The setpoint's fields (also what the log records)."""
+    def fields(self, state: State, cmd: Command, airborne: bool = True) -> dict:
+        """The setpoint's fields (also what the log records); ``airborne``: the rate-error integral may learn."""
         m = self.model
         alpha = self.body_accel(state, cmd)
         thrust = m.thrust_norm(cmd.thrust_n)
@@ -192,6 +271,10 @@ class OutputAdapter:
         h = m.ts_s
         ahead = quat_multiply(q_now, rotation_quaternion((omega[0] * h, omega[1] * h, omega[2] * h)))
         e = [angle_for_rate(w, k, a) for w, k, a in zip(demand, m.angle_gain_1_s, m.angle_accel_limit_rad_s2)]
+        if self.integral is not None:
+            delta = self.integral.update(omega, airborne)
+            self.integral.demanded(demand)
+            e = [e[0] + delta[0], e[1] + delta[1], e[2] + delta[2]]
         q_t = quat_multiply(ahead, rotation_quaternion(e))
         n = math.sqrt(sum(c * c for c in q_t))
         return {"message": "SET_ATTITUDE_TARGET", "type_mask": IGNORE_RATES, "q": [c / n for c in q_t],
@@ -209,7 +292,9 @@ class OutputAdapter:
 
     def level(self, state: State, thrust_n: float, time_boot_ms: int):
         """A level-attitude setpoint (yaw held, zero body rates) at ``thrust_n``: what failsafes send while
-        the link lives."""
+        the link lives.  The rate-error integral starts again after it."""
+        if self.integral is not None:
+            self.integral.reset()
         q = euler_to_quaternion(0.0, 0.0, state.yaw)
         return self.mav.set_attitude_target_encode(time_boot_ms & 0xFFFFFFFF, self.target_system,
                                                    self.target_component, IGNORE_RATES, q, 0.0, 0.0, 0.0,
@@ -225,4 +310,5 @@ def build_adapter(kind: str, model, fc, out, ts_s: float, mav, target_system: in
         kind=kind, mass_kg=model.mass_kg, gravity_m_s2=model.gravity_m_s2, hover_throttle=out.hover_throttle,
         inertia_kg_m2=fc.inertia_kg_m2, max_torque_nm=fc.max_torque_nm, rate_gain_1_s=fc.rate_gain_1_s,
         angle_gain_1_s=out.angle_gain_1_s, angle_accel_limit_rad_s2=out.angle_accel_limit_rad_s2,
-        rate_limit_rad_s=out.rate_limit_rad_s, ts_s=ts_s), mav, target_system, target_component)
+        rate_limit_rad_s=out.rate_limit_rad_s, ts_s=ts_s, rate_integral_max_rad=fc.rate_integral_max_rad,
+        rate_response_s=fc.rate_response_s), mav, target_system, target_component)

@@ -14,6 +14,7 @@ runs on the vehicle's clock, its telemetry time stamps).
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import shutil
 import socket
@@ -147,14 +148,20 @@ class Px4Sitl(FirmwareChild):
         PX4_SIM_SPEED_FACTOR (1: real time).
     workdir : path-like or None
         Where it runs (None: a new temporary directory, removed by :meth:`stop`).
+    params : mapping of str to float, optional
+        Parameters set at its start (``PX4_PARAM_<NAME>``, which PX4's rcS applies after the airframe's).
     """
 
-    def __init__(self, build=None, *, speedup: float = 1.0, workdir=None) -> None:
+    def __init__(self, build=None, *, speedup: float = 1.0, workdir=None, params=None) -> None:
         if not 0.1 <= speedup <= 50.0:
             raise ValueError(f"speedup must be in 0.1..50, got {speedup!r}")
         self.build = find_px4(build)
         self.binary = self.build / "bin" / "px4"
         self.speedup = float(speedup)
+        self.params = {str(k).upper(): float(v) for k, v in (params or {}).items()}
+        for name, value in self.params.items():
+            if not name.replace("_", "").isalnum() or not math.isfinite(value):
+                raise ValueError(f"a PX4 parameter must be NAME=finite number, got {name}={value!r}")
         self._own_dir = workdir is None
         self.workdir = Path(tempfile.mkdtemp(prefix="gcs-px4-") if workdir is None else workdir)
         self.instance: int | None = None
@@ -179,6 +186,7 @@ class Px4Sitl(FirmwareChild):
         env = dict(os.environ)
         env.update(PX4_SYS_AUTOSTART=AIRFRAME, PX4_SIM_MODEL="sihsim_quadx", PX4_SIMULATOR="sihsim",
                    PX4_SIM_SPEED_FACTOR=f"{self.speedup:g}")
+        env.update({f"PX4_PARAM_{name}": f"{value:g}" for name, value in self.params.items()})
         return env
 
     def command(self) -> list[str]:

@@ -4,7 +4,8 @@ Conversions go through :mod:`quadrotor.frames` only: LOCAL_POSITION_NED becomes
 (x, y, z up) and (vx, vy, vz up); ATTITUDE's body rates become Euler-angle
 rates.  The vehicle's own time (``time_boot_ms``) is tracked: it is the clock of a
 lockstep or paced flight.  Freshness is kept per stream twice: by arrival on the loop's clock,
-and by the sample's own time stamp on the vehicle's clock (:class:`VehicleTimeMap`), so that
+and by the sample's own time stamp on the vehicle's clock (:class:`~gcs.vehicles.time_map.VehicleTimeMap`,
+which tracks the vehicle clock's rate and offset), so that
 old samples delivered late (a link or a ground station that stalled, a radio that buffered)
 count as old.  EKF_STATUS_REPORT flags are kept for the readiness report, EXTENDED_SYS_STATE's
 landed state and PX4's EVENTs (arming refusals) for the profile.
@@ -23,44 +24,13 @@ from gcs.estimate import StateEstimator
 from gcs.flight.validate import TelemetryValidator
 from gcs.vehicles.px4_events import parse_event
 from gcs.vehicles.px4_modes import px4_mode_name
+from gcs.vehicles.time_map import VehicleTimeMap
 from quadrotor.mavlink.modes import copter_mode_name
 from quadrotor.frames import body_rates_to_euler_rates, ned_to_paper_position, ned_to_paper_velocity
 
 __all__ = ["VehicleStatus", "Telemetry", "VehicleTimeMap"]
 
 _LANDED = {0: "landed state unknown", 1: "on the ground", 2: "in the air", 3: "taking off", 4: "landing"}
-#: Upward drift allowed for the vehicle-to-loop clock offset (crystal drift; a restart of the floor) [s/s].
-OFFSET_DRIFT = 1e-4
-
-
-class VehicleTimeMap:
-    """Loop time <-> vehicle time: the smallest ``arrival - time stamp`` seen (the fastest delivery).
-
-    A sample delivered late has a larger difference and does not move the floor; the floor may
-    rise by :data:`OFFSET_DRIFT` per second (two clocks drift apart).  ``age_ns`` of a sample is
-    then how old it is on the vehicle's clock, whenever it arrived.
-    """
-
-    def __init__(self) -> None:
-        self.offset_ns: int | None = None
-        self._at_ns = 0
-
-    def observe(self, arrival_ns: int, stamp_ns: int) -> None:
-        d = arrival_ns - stamp_ns
-        if self.offset_ns is None:
-            self.offset_ns, self._at_ns = d, arrival_ns
-            return
-        floor = self.offset_ns + int(OFFSET_DRIFT * max(0, arrival_ns - self._at_ns))
-        self.offset_ns, self._at_ns = min(d, floor), arrival_ns
-
-    def age_ns(self, now_ns: int, stamp_ns: int) -> int:
-        """Age of a sample stamped ``stamp_ns`` (vehicle clock) at loop time ``now_ns``."""
-        if self.offset_ns is None:
-            return 0
-        floor = self.offset_ns + int(OFFSET_DRIFT * max(0, now_ns - self._at_ns))
-        return now_ns - floor - stamp_ns
-
-
 
 @dataclass
 class VehicleStatus:

@@ -115,6 +115,45 @@ def _connect_args(tmp_path: Path, name: str, port: int, px4, *extra: str) -> lis
             "--summary", str(tmp_path / f"{name}.json"), "--log", str(tmp_path / f"{name}.mcap"), "-q", *extra]
 
 
+def _udp_port_free(port: int) -> bool:
+    import socket
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        try:
+            s.bind(("0.0.0.0", port))
+        except OSError:
+            return False
+    return True
+
+
+def test_px4_started_as_users_start_it_flies_every_controller_on_connect_in_real_time(tmp_path):
+    """PX4 on its GCS link (it sends to 127.0.0.1:14550, as ../shared/px4/run prints), gcs fly --connect
+    udpin:0.0.0.0:14550, real time, the loop on the ground station's clock: PX4 SITL's time_boot_ms runs
+    at about 0.988 of it, and the old time map (a floor rising 1e-4 s/s) ended every flight with exit 3
+    "telemetry stale" at t = 20-21 s.  Each controller flies 26 s of the circle to completion, and the
+    summary reports the vehicle clock's rate the map estimated."""
+    from gcs.vehicles.px4_sitl import Px4Sitl
+
+    if not _udp_port_free(14550):
+        pytest.skip("UDP 14550 (PX4's GCS link) is taken by another program")
+    with Px4Sitl(BUILD) as px4:
+        for controller in ("nlsoc", "loc", "pd"):
+            name = f"gcslink-{controller}"
+            p = subprocess.run([sys.executable, "-m", "gcs.cli", "fly", "--connect", "udpin:0.0.0.0:14550",
+                                "--target-system", str(px4.instance + 1), "--config", "outdoor-circle",
+                                "--controller", controller, "--duration", "26",
+                                "--summary", str(tmp_path / f"{name}.json"), "--log", str(tmp_path / f"{name}.mcap"),
+                                "-q"], env=_env(tmp_path), capture_output=True, text=True, timeout=240)
+            assert "Traceback" not in p.stderr, p.stderr[-2000:]
+            assert p.returncode == 0, f"{controller}: exit {p.returncode}: {p.stderr[-2000:]}"
+            s, ev = _events(tmp_path, name)
+            assert s["exit_reason"] == "completed"
+            _check_landed_and_restored(ev)
+            rate = s["link"]["vehicle_clock_rate"]
+            print(f"{controller}: RMS {s['metrics']['rms_error_m']:.3f} m, vehicle clock rate {rate:.4f}")
+            assert 0.9 <= rate <= 1.1, rate
+            assert s["metrics"]["rms_error_m"] < 0.2
+
+
 def test_an_offboard_mode_that_never_arrives_refuses_arming(tmp_path):
     """DO_SET_MODE(OFFBOARD) ACKed ACCEPTED (forged by a proxy) but PX4's HEARTBEAT never shows OFFBOARD:
     refused before arming (exit 7), naming the mode the vehicle is in."""

@@ -19,7 +19,7 @@ from .spec import Outcome, fmt
 
 EXIT_CODES = {"completed": 0, "bad_config": 2, "telemetry_lost": 3, "geofence": 4, "interrupted": 5,
               "link_error": 6, "preflight_refused": 7, "immediate_land": 8, "vehicle_took_over": 9,
-              "unsafe_command": 10, "internal_error": 11, "telemetry_slow": 12}
+              "unsafe_command": 10, "internal_error": 11, "telemetry_slow": 12, "out_of_authority": 13}
 DOCUMENTED_CODES = set(EXIT_CODES.values())
 #: Every flight of the session: (test id, what was injected, the outcome in one line); conftest prints it.
 REGISTRY: list[dict] = []
