@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from gcs.flight.result import EXIT_CODES
-from gcs.vehicles.authority import INTEGRAL_PINNED_S, THRUST_SATURATED_S, AuthorityWatch
+from gcs.flight.authority import INTEGRAL_PINNED_S, THRUST_SATURATED_S, AuthorityWatch
 
 TS = 0.01
 
@@ -68,3 +68,39 @@ def test_a_correction_below_its_bound_or_off_is_fine():
 def test_bad_periods_are_refused():
     with pytest.raises(ValueError):
         AuthorityWatch(0.0)
+
+
+def test_not_following_the_reference_for_2s_is_past_authority():
+    from gcs.flight.authority import TRACKING_LOST_S, TrackingWatch
+    from quadrotor.state import State
+
+    w = TrackingWatch(TS)
+    ref = State(0.0, 0.0, 1.5)
+    for _ in range(1000):  # 0.9 m away for 10 s: not lost
+        assert w.update(State(0.9, 0.0, 1.5), ref) is None
+    for _ in range(int(TRACKING_LOST_S / TS) - 1):  # on the ground under a 1.5 m reference
+        assert w.update(State(0.0, 0.0, 0.0), ref) is None
+    assert "does not follow" in w.update(State(0.0, 0.0, 0.0), ref)
+
+
+def test_the_tracking_watch_follows_its_config_keys_and_zero_turns_it_off(tmp_path):
+    from gcs.config import load_config
+    from gcs.errors import ConfigError
+    from gcs.config.parse import resolve_config_path
+    from gcs.flight.authority import TrackingWatch
+    from quadrotor.state import State
+
+    off = TrackingWatch(TS, 0.0, 2.0)
+    assert all(off.update(State(0.0, 0.0, 0.0), State(0.0, 0.0, 9.0)) is None for _ in range(1000))
+    base = load_config("outdoor-circle")
+    assert (base.flight.tracking_lost_m, base.flight.tracking_lost_s) == (1.0, 2.0)
+    text = resolve_config_path("outdoor-circle").read_text()
+    for body, ok in (("tracking_lost_m = 0.0\ntracking_lost_s = 5.0\n", True), ("tracking_lost_s = 0.0\n", False)):
+        f = tmp_path / "c.toml"
+        f.write_text(text + "\n[flight]\n" + body)
+        if ok:
+            fc = load_config(f).flight
+            assert (fc.tracking_lost_m, fc.tracking_lost_s) == (0.0, 5.0)
+        else:
+            with pytest.raises(ConfigError, match="tracking_lost_s"):
+                load_config(f)

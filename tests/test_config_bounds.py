@@ -39,7 +39,8 @@ ABSENT = {
         "ceiling_m": 10.0, "rate_gain_1_s": [65.0, 65.0, 80.0], "inertia_kg_m2": [0.01, 0.01, 0.018],
         "max_torque_nm": [1.9, 1.9, 0.2], "position_std_m": 0.05, "velocity_std_m_s": 0.05,
         "landing_speed_m_s": 0.5, "min_battery_v": 10.5, "land_timeout_s": 30.0,
-        "rate_integral_max_rad": [0.1, 0.1, 0.2], "rate_response_s": 0.04}.items()},
+        "rate_integral_max_rad": [0.1, 0.1, 0.2], "rate_response_s": 0.04, "tracking_lost_m": 1.0,
+        "tracking_lost_s": 2.0}.items()},
 }
 
 

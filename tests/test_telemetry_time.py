@@ -155,6 +155,7 @@ def test_time_map_tracks_a_vehicle_clock_at_its_own_rate(rate):
     assert warm <= max(0.0, 1 - rate) * 1.5 * S + 10 * MS
     assert worst <= 10 * MS
     assert m.rate == pytest.approx(rate, abs=2e-3)
+    assert m.mean_rate == pytest.approx(rate, abs=1e-3)
     # between samples, the vehicle's time moves at its rate
     assert (m.vehicle_time_ns(arrival + 1 * S) - m.vehicle_time_ns(arrival)) / S == pytest.approx(rate, abs=2e-3)
 
@@ -196,3 +197,23 @@ def test_time_map_a_link_delivering_late_for_2s_is_old_throughout(rate):
     assert min(ages) > 0.35 * S
 
 
+
+
+def test_time_map_a_vehicle_clock_that_pauses_reports_its_long_run_rate():
+    """A SITL on a loaded machine: its clock (and its physics) stop for 0.4 s now and then while
+    ours runs on.  The windowed slope may swing to its bound after a pause; the rate since the
+    first sample (the summary's vehicle_clock_rate) is the long-run one, and on-time samples after
+    each pause are young again within a few seconds."""
+    m = VehicleTimeMap()
+    v = VehicleClock(0.988)
+    v.run(m, 20.0)
+    paused_ns = 0
+    for _ in range(3):
+        v.l0 += 400 * MS  # the vehicle's clock stands still 0.4 s of ours
+        paused_ns += 400 * MS
+        v.run(m, 10.0)
+    arrival, stamp = v.run(m, 0.1)
+    elapsed_s = (arrival - v.l0 + paused_ns) / S
+    expected = 0.988 * (elapsed_s - paused_ns / S) / elapsed_s
+    assert m.mean_rate == pytest.approx(expected, abs=3e-3)
+    assert 0 <= m.age_ns(arrival, stamp) < 20 * MS

@@ -92,6 +92,8 @@ BOUNDS: dict[str, Bound] = {
     "flight.rate_gain_1_s": Bound(0.1, 1000.0, "1/s", "the output adapters' rate-demand gain"),
     "flight.rate_integral_max_rad": Bound(0.0, 0.5, "rad", "the attitude offset the rate-error integral may add"),
     "flight.rate_response_s": Bound(0.001, 1.0, "s", "the modelled response time of the autopilot's rate loop"),
+    "flight.tracking_lost_m": Bound(0.0, 1e3, "m", "the distance from the reference that is not following; 0 = off"),
+    "flight.tracking_lost_s": Bound(0.1, 600.0, "s", "how long not following lasts before landing"),
     "flight.inertia_kg_m2": shared.INERTIA_KG_M2,
     "flight.max_torque_nm": _TORQUE,
     "flight.position_std_m": Bound(1e-4, 100.0, "m", "the noise assumed for LOCAL_POSITION_NED"),

@@ -239,8 +239,9 @@ def _flight(f: Reader) -> FlightConfig:
         inertia_kg_m2=f.vector("inertia_kg_m2", d.inertia_kg_m2, rpy),  # type: ignore[arg-type]
         max_torque_nm=f.vector("max_torque_nm", d.max_torque_nm, rpy),  # type: ignore[arg-type]
         **{k: f.number(k, getattr(d, k)) for k in (
-            "telemetry_rate_hz", "telemetry_stale_s", "rate_response_s", "max_tilt_deg", "fence_half_width_m",
-            "ceiling_m", "position_std_m", "velocity_std_m_s", "landing_speed_m_s", "min_battery_v", "land_timeout_s")},
+            "telemetry_rate_hz", "telemetry_stale_s", "rate_response_s", "tracking_lost_m", "tracking_lost_s",
+            "max_tilt_deg", "fence_half_width_m", "ceiling_m", "position_std_m", "velocity_std_m_s",
+            "landing_speed_m_s", "min_battery_v", "land_timeout_s")},
     )
     messages = out.telemetry_rate_hz * out.telemetry_stale_s
     if messages < MIN_STALE_MESSAGES * (1 - 1e-9):

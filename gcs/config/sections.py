@@ -199,6 +199,9 @@ class FlightConfig:
     rate_response_s : float
         The time constant the autopilot's rate loop is modelled to follow the demand with (first order, after
         one control period), which the integral compares the measured rate against.
+    tracking_lost_m, tracking_lost_s : float
+        Farther than ``tracking_lost_m`` from the reference for ``tracking_lost_s`` lands the vehicle with
+        exit reason ``out_of_authority`` (:class:`gcs.flight.authority.TrackingWatch`); 0 m: no watch.
     inertia_kg_m2, max_torque_nm : (3,) float
         For the actuator output: torque = I alpha, normalised by the maximum torque.
     position_std_m, velocity_std_m_s : float
@@ -220,6 +223,8 @@ class FlightConfig:
     rate_gain_1_s: tuple[float, float, float] = (65.0, 65.0, 80.0)
     rate_integral_max_rad: tuple[float, float, float] = (0.1, 0.1, 0.2)
     rate_response_s: float = 0.04
+    tracking_lost_m: float = 1.0
+    tracking_lost_s: float = 2.0
     inertia_kg_m2: tuple[float, float, float] = (0.010, 0.010, 0.018)
     max_torque_nm: tuple[float, float, float] = (1.949, 1.949, 0.196)
     position_std_m: float = 0.05

@@ -27,6 +27,7 @@ import numpy as np
 from gcs.config import PhaseConfig
 from gcs.control import FiniteHorizonController, model_params
 from gcs.control.base import Controller, horizon_mode
+from gcs.flight.authority import TrackingWatch
 from gcs.flight.context import FlightContext
 from gcs.flight.result import FlightResult
 from gcs.flight.safety import SafetyEnvelope
@@ -49,6 +50,7 @@ class _Track:
 
     origin: tuple[float, float, float]
     t0_ns: int
+    tracking: TrackingWatch
     states: list = field(default_factory=list)
     truths: list = field(default_factory=list)
     refs: list = field(default_factory=list)
@@ -152,7 +154,8 @@ class MissionLoop:
                          if self.cost else None, origin_m=list(origin))
         ctx.event("phase", f"takeoff point (x {origin[0]:.2f}, y {origin[1]:.2f}, z {origin[2]:.2f}) m")
         ctx.event("phase", f"mission start: {len(self.config.mission)} phases, {self.mission.duration_s:g} s")
-        return _Track(origin=origin, t0_ns=t0)
+        fc = self.config.flight
+        return _Track(origin=origin, t0_ns=t0, tracking=TrackingWatch(e.ts_s, fc.tracking_lost_m, fc.tracking_lost_s))
 
     def _fly(self, tr: _Track) -> str:
         """The tick loop; returns the exit reason."""
@@ -178,6 +181,10 @@ class MissionLoop:
             ref = self._reference(k, t, state, tr)
             if ref is None:
                 return "interrupted" if tr.handled_interrupts else "completed"
+            lost = tr.tracking.update(state, ref)
+            if lost is not None:
+                self.ctx.event("failsafe", f"{lost} at t = {t:.2f} s: landing")
+                return "out_of_authority"
             raw = self.controller.step(k, state, ref, disturbance_m_s2=self._drift(t, tr))
             cmd, reason = self._limit(t, state, raw)
             if reason is not None:

@@ -19,7 +19,7 @@ code  exit_reason        what happened
                          asking for them again): landing
 13    out_of_authority   a fault past the vehicle's authority (thrust at its top for 1 s,
                          the attitude output's rate correction at its bound for 2 s):
-                         landing (:mod:`gcs.vehicles.authority`)
+                         landing (:mod:`gcs.flight.authority`)
 ====  =================  ==========================================================
 
 Whatever ends the flight, the vehicle is landed and disarmed (or left to the pilot, 9),

@@ -28,7 +28,7 @@ from gcs.flight.context import FlightContext
 from gcs.link.guard import GuardLimits, OutputGuard, UnsafeCommand
 from gcs.link.mavlink import LinkError, MavlinkLink
 from gcs.vehicles.ardupilot import ArduPilotProfile
-from gcs.vehicles.authority import AuthorityWatch
+from gcs.flight.authority import AuthorityWatch
 from gcs.vehicles.firmware import Firmware
 from gcs.vehicles.linkio import LinkIO
 from gcs.vehicles.output import OutputAdapter, build_adapter
@@ -451,7 +451,8 @@ class MavlinkSession:
                 "stream_rates_hz": dict(self.streams.rates_hz), "stream_rerequests": self.streams.rerequests,
                 "timesync_rtt_ms": self.telemetry.timesync_rtt_ms,
                 "timesync_rtt_median_ms": float(np.median(samples)) if samples else None,
-                "vehicle_clock_rate": self.telemetry.time_map.rate}
+                "vehicle_clock_rate": self.telemetry.time_map.mean_rate,
+                "vehicle_clock_rate_recent": self.telemetry.time_map.rate}
 
     def loop_summary(self) -> dict:
         clock = self.ctx.clock if self.ctx is not None else None

@@ -55,6 +55,7 @@ class VehicleTimeMap:
         self._c_ns = 0.0
         self._fitted = False
         self._last_ns = 0
+        self._first: tuple[int, int] | None = None  # the first closed bin's fastest (arrival, d)
 
     # ---------------------------------------------------------------- what users read
     @property
@@ -68,6 +69,19 @@ class VehicleTimeMap:
     def rate(self) -> float:
         """Vehicle seconds per loop second (1.0 until the history spans a few bins)."""
         return 1.0 - self._slope
+
+    @property
+    def mean_rate(self) -> float:
+        """Vehicle seconds per loop second since the first closed bin (the floor's rise over all of it).
+
+        The long-run rate a user compares with the vehicle's crystal; :attr:`rate` is the windowed
+        slope the floor is carried at, which follows a vehicle clock that slows under load or pauses.
+        1.0 until the history spans :data:`WINDOW_S` / 4.
+        """
+        if self._first is None or self._last_ns - self._first[0] < _BIN_NS * _N_BINS // 4:
+            return self.rate
+        t, d = self._first
+        return 1.0 - (self._floor(self._last_ns) - d) / (self._last_ns - t)
 
     def vehicle_time_ns(self, now_ns: int) -> int | None:
         """The vehicle's clock at loop time ``now_ns`` less the fastest delivery (None before any sample)."""
@@ -90,6 +104,8 @@ class VehicleTimeMap:
             self._cur, self._cur_bin = (arrival_ns, d), b
         elif b != self._cur_bin:
             self._bins.append(self._cur)
+            if self._first is None:
+                self._first = self._cur
             self._cur, self._cur_bin = (arrival_ns, d), b
             self._fit()
         elif d < self._cur[1]:

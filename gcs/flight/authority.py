@@ -10,18 +10,29 @@ Two signs, each in the setpoints we send (so they hold whatever the autopilot an
   :data:`INTEGRAL_PINNED_S`: the autopilot's rate loop keeps falling short of the demand by more than the
   output can make up (a motor too weak for the yaw or roll authority left; gains far too low).
 
-Short saturations (a take-off, a gust) are normal; only sustained ones count.  The session reports
-the first as ``out_of_authority`` (exit 13): the flight lands.
+* **not following** (:class:`TrackingWatch`, any session): the estimate farther than
+  :data:`TRACKING_LOST_M` from the reference for :data:`TRACKING_LOST_S` (``[flight] tracking_lost_m``,
+  ``tracking_lost_s``; the missions are ramps and
+  circles, never steps: a nominal flight stays within 0.1 m): a vehicle that did not leave the ground, or
+  that the controller cannot hold.
+
+Short saturations (a take-off, a gust) are normal; only sustained ones count.  The first reported
+ends the flight as ``out_of_authority`` (exit 13): it lands.
 """
 
 from __future__ import annotations
 
-__all__ = ["AuthorityWatch", "THRUST_SATURATED_S", "INTEGRAL_PINNED_S", "PINNED_FRACTION"]
+import math
+
+__all__ = ["AuthorityWatch", "TrackingWatch", "THRUST_SATURATED_S", "INTEGRAL_PINNED_S", "PINNED_FRACTION",
+           "TRACKING_LOST_M", "TRACKING_LOST_S"]
 
 #: How long the thrust field may stay at its top in the air [s].
 THRUST_SATURATED_S = 1.0
 #: How long the rate-error integral may stay at its bound on one axis [s].
 INTEGRAL_PINNED_S = 2.0
+#: Distance from the reference that counts as not following [m], and for how long [s].
+TRACKING_LOST_M, TRACKING_LOST_S = 1.0, 2.0
 #: Fraction of the bound that counts as pinned.
 PINNED_FRACTION = 0.98
 _AXES = ("roll", "pitch", "yaw")
@@ -79,3 +90,33 @@ class AuthorityWatch:
     def failure(self) -> str | None:
         """What is past the vehicle's authority, once it has lasted (None: nothing)."""
         return self._failure
+
+
+class TrackingWatch:
+    """Says when the vehicle has not followed the reference (one :meth:`update` per control period).
+
+    Parameters
+    ----------
+    ts_s : float
+        The control period [s].
+    lost_m, lost_s : float
+        Farther than ``lost_m`` [m] for ``lost_s`` [s] is not following; ``lost_m = 0``: never reported.
+    """
+
+    def __init__(self, ts_s: float, lost_m: float = TRACKING_LOST_M, lost_s: float = TRACKING_LOST_S) -> None:
+        if not (ts_s > 0.0 and lost_m >= 0.0 and lost_s > 0.0):
+            raise ValueError(f"need positive values, got {ts_s!r}, {lost_m!r}, {lost_s!r}")
+        self.ts_s, self.lost_m = ts_s, lost_m
+        self._n = max(1, round(lost_s / ts_s))
+        self.ticks = 0
+
+    def update(self, state, ref) -> str | None:
+        """One period with the estimate ``state`` and the reference ``ref`` (x, y, z [m]); the failure or None."""
+        if self.lost_m == 0.0:
+            return None
+        e = math.sqrt((state.x - ref.x) ** 2 + (state.y - ref.y) ** 2 + (state.z - ref.z) ** 2)
+        self.ticks = self.ticks + 1 if e > self.lost_m else 0
+        if self.ticks < self._n:
+            return None
+        return (f"{e:.2f} m from the reference, farther than {self.lost_m:g} m for {self.ticks * self.ts_s:.1f} s: "
+                "the vehicle does not follow (past its authority?)")
