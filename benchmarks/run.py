@@ -30,7 +30,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 #: Report order; any other bench_*.py found follows.
-ORDER = ("control", "fly", "link", "sitl", "log", "campaign", "rig", "firmware", "autopilots", "fidelity")
+ORDER = ("control", "fly", "link", "sitl", "log", "campaign", "rig", "firmware", "autopilots", "fidelity", "robustness")
 TITLES = {"control": "Controller step and gain design (bench_control.py)",
           "fly": "gcs fly: lockstep speed and the loop tick (bench_fly.py)",
           "link": "Link overhead: MavlinkLink vs raw pymavlink (bench_link.py)",
@@ -40,7 +40,8 @@ TITLES = {"control": "Controller step and gain design (bench_control.py)",
           "rig": "Indoor rig protocol and emulator (bench_rig.py)",
           "firmware": "ArduCopter SITL in the loop: reliable speed-up (bench_firmware.py)",
           "autopilots": "The same flights on the built-in SITL, ArduCopter and PX4 (bench_autopilots.py)",
-          "fidelity": "sitl --emulate arducopter vs ArduCopter SITL: metrics and step responses (bench_fidelity.py)"}
+          "fidelity": "sitl --emulate arducopter vs ArduCopter SITL: metrics and step responses (bench_fidelity.py)",
+          "robustness": "Non-nominal vehicles beside the autopilot's own position controller (bench_robustness.py)"}
 
 
 def benches(only: list[str] | None) -> list[Path]:

@@ -40,7 +40,14 @@ def _cases():
         # bad CRCs and truncated frames (each loses a datagram: low rates in lockstep)
         "bad_crc_and_truncation": (lambda: [BitFlip(p=0.003), Truncate(p=0.003)], {"output": "actuator"}, True),
         "duplicates_and_reorder": (lambda: [Duplicate(p=0.1), Reorder(p=0.3)], {}, True),
-        "other_system_ids": (lambda: [OtherSystem(p=0.3)], {"output": "rates"}, True),
+        # copies of the vehicle's frames as from other system ids: the ground station ignores them
+        "other_system_ids": (lambda: [OtherSystem(p=0.3, directions=(DOWN,))], {"output": "rates"}, True),
+        # copies of our setpoints (30 % with hostile fields) as from other system ids, to the vehicle: an
+        # autopilot takes setpoints from any system on an unsigned link (ArduPilot SYSID_ENFORCE 0), so the
+        # vehicle flies the mutated copies too and wanders metres off; the flight lands (not following the
+        # reference: out_of_authority), it is not flown on
+        "other_system_setpoints_to_vehicle": (lambda: [OtherSystem(p=0.3, directions=(UP,))], {"output": "rates"},
+                                              False),
         # valid frames (good CRC, the vehicle's ids) with NaN / inf in ATTITUDE, LOCAL_POSITION_NED
         "nonfinite_fields": (lambda: [HostileFields(p=0.03, values=NAN_INF, name="nonfinite_fields")], {}, True),
         # the same from a second socket (another source port) than the vehicle's
