@@ -78,7 +78,7 @@ def test_a_vehicle_that_cannot_hover_is_refused(capsys, args, words):
 
 
 def test_options_override_the_file_and_describe_shows_them(tmp_path, capsys):
-    text = (V.source and load_text()) + "\n[faults]\nmotor_scale = [0.9, 1.0, 1.0, 1.0]\nmass_scale = 1.1\n"
+    text = load_text() + "\n[faults]\nmotor_scale = [0.9, 1.0, 1.0, 1.0]\nmass_scale = 1.1\n"
     p = tmp_path / "v.toml"
     p.write_text(text)
     assert main(["--vehicle", str(p), "--mass-scale=1.2", "--clock-rate=0.988", "--describe"]) == 0
