@@ -95,6 +95,8 @@ def build_parser() -> argparse.ArgumentParser:
                 formatter_class=argparse.RawDescriptionHelpFormatter)
     _endpoint_options(p.add_argument_group("endpoints (any number, combined; default --udp 127.0.0.1:14550)"))
     _simulation_options(p.add_argument_group("simulation"))
+    _fault_options(p.add_argument_group("vehicle faults (override the vehicle file's [faults]; the autopilot "
+                                        "is not told)"))
     _link_options(p.add_argument_group("link emulation (both directions)"))
     rig = p.add_argument_group("4-DOF rig")
     rig.add_argument("--rig", choices=RIG_KINDS, default=None,
@@ -157,6 +159,21 @@ def _simulation_options(sim: argparse._ArgumentGroup) -> None:
                           f"(default {EKF_READY_S:g}, as measured on the firmware)")
 
 
+def _fault_options(f: argparse._ArgumentGroup) -> None:
+    f.add_argument("--motor-scale", metavar="A,B,C,D", default=None,
+                   help="thrust produced per thrust commanded, motors 1..4, each 0.3..1.5 (a weak motor: "
+                        "0.85,1,1,1; as ArduPilot SIM_ENGINE_MUL)")
+    f.add_argument("--com-offset", metavar="X,Y,Z", default=None,
+                   help="centre of mass moved by X,Y,Z m (FRD, each within 0.1 m): the rotor arms about it")
+    f.add_argument("--mass-scale", metavar="S", type=float, default=None,
+                   help="true mass = S x the vehicle file's (0.5..2); MOT_THST_HOVER stays nominal")
+    f.add_argument("--inertia-scale", metavar="S", type=float, default=None,
+                   help="true inertia = S x the vehicle file's (0.5..2)")
+    f.add_argument("--clock-rate", metavar="R", type=float, default=None,
+                   help="the vehicle clock (time_boot_ms, time_usec) runs R times simulated time (0.9..1.1; "
+                        "PX4 SITL ~0.988); the physics does not change")
+
+
 def _link_options(link: argparse._ArgumentGroup) -> None:
     link.add_argument("--baud", metavar="N", type=int, default=None,
                       help="byte rate limit as a serial line, 10 bits/byte (default: 115200 with --rig, 57600 with "
@@ -180,6 +197,8 @@ def _describe(v: VehicleParams) -> str:
         f"hover thrust     {v.hover_thrust_fraction:.4f} (MOT_THST_HOVER)",
         f"max torque       roll {tq[0]:.4f}  pitch {tq[1]:.4f}  yaw {tq[2]:.4f} N m = controls 1.0",
         f"max ang. accel   roll {tq[0] / ix[0]:.1f}  pitch {tq[1] / ix[1]:.1f}  yaw {tq[2] / ix[2]:.2f} rad/s^2",
+        *([] if v.faults.nominal else [f"faults           {v.faults.describe()} (the autopilot flies the nominal "
+                                       "values above)"]),
     ])
 
 
@@ -204,7 +223,8 @@ _MAVLINK_ONLY = (("vehicle", None, "--vehicle"), ("model", None, "--model"), ("w
                  ("param", [], "--param"), ("sysid", None, "--sysid"), ("prearm_delay", 0.0, "--prearm-delay"),
                  ("signing_key", None, "--signing-key"), ("signing_state", None, "--signing-state"),
                  ("start_attitude", None, "--start-attitude"), ("start_altitude", 0.0, "--start-altitude"),
-                 ("emulate", None, "--emulate"), ("ekf_ready_s", None, "--ekf-ready-s"))
+                 ("emulate", None, "--emulate"), ("ekf_ready_s", None, "--ekf-ready-s"),
+                 *((attr, None, option) for option, attr, _, _ in options.FAULT_OPTIONS))
 
 
 def _run_rig(args: argparse.Namespace) -> int:
@@ -269,6 +289,7 @@ def _run(args: argparse.Namespace) -> int:
     vehicle = arducopter_sitl_vehicle() if args.emulate and args.vehicle is None else load_vehicle(args.vehicle)
     if args.model is not None:
         vehicle = vehicle.with_model(args.model)
+    vehicle = options.faults(args, vehicle)
     if args.describe:
         print(_describe(vehicle), flush=True)
         return 0
@@ -293,6 +314,8 @@ def _run(args: argparse.Namespace) -> int:
                         signing_state=state, radio=radio, clock=clock, prearm_delay_s=args.prearm_delay,
                         emulate=args.emulate, ekf_ready_s=args.ekf_ready_s)
     what = f"{vehicle.name} ({vehicle.model}{', emulating ' + args.emulate if args.emulate else ''})"
+    if not vehicle.faults.nominal:
+        what += f", faults: {vehicle.faults.describe()}"
     return _serve(server, what, args)
 
 

@@ -19,7 +19,16 @@ Every numeric option must be finite and within its range; a bad one raises
 --latency           0 .. 10 s
 --bit-error-rate    0 .. <1
 --parent-pid        >= 1
+--motor-scale       4 factors (motors 1..4), each 0.3 .. 1.5
+--com-offset        x,y,z [m, FRD], each -0.1 .. 0.1
+--mass-scale        0.5 .. 2.0
+--inertia-scale     0.5 .. 2.0
+--clock-rate        0.9 .. 1.1
 ==================  =========================================================
+
+The vehicle fault options (:func:`faults`, :mod:`sitl.copter.faults`) override the vehicle file's
+``[faults]`` keys one by one; a combination that cannot hover the true vehicle with margin is refused
+naming the fault options given (``--motor-scale: cannot hover: ...``).
 
 Endpoints (:func:`open_endpoints`): ``--udp``, ``--udp-listen`` and ``--tcp``
 may be given several times and combined with ``--pty``; each is opened in
@@ -32,12 +41,16 @@ import argparse
 import hashlib
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 
+from quadrotor.errors import ConfigError
 from quadrotor.wind import WindParams
 from sitl.copter.ardupilot_emulation.vehicle import emulation_params
+from sitl.copter.faults import FAULT_RANGES
 from sitl.copter.params import ParamStore, ardupilot_params
 from sitl.copter.simulation import InitialConditions
 from sitl.copter.vehicle import VehicleParams
+from sitl.copter.vehicle_file import with_faults
 from sitl.errors import UsageError
 from sitl.net.pty import PtyTransport
 from sitl.net.tcp import TcpTransport
@@ -45,7 +58,7 @@ from sitl.net.transport import Transport, parse_host_port
 from sitl.net.udp import UdpTransport
 
 __all__ = ["EndpointAction", "check_common", "check_mavlink", "wind", "params", "signing_key", "initial",
-           "open_endpoints", "DEFAULT_ENDPOINT", "MAX_SEED"]
+           "faults", "FAULT_OPTIONS", "open_endpoints", "DEFAULT_ENDPOINT", "MAX_SEED"]
 
 MAX_SEED = 2**63 - 1
 DEFAULT_ENDPOINT = ("udp", "127.0.0.1:14550", "--udp")
@@ -115,7 +128,8 @@ def _floats(text: str, option: str, count: tuple[int, int]) -> list[float]:
     except ValueError:
         raise UsageError(f"{option}: expected comma-separated numbers, got {text!r}") from None
     if not count[0] <= len(vals) <= count[1]:
-        raise UsageError(f"{option}: expected {count[0]} to {count[1]} numbers, got {text!r}")
+        n = f"{count[0]}" if count[0] == count[1] else f"{count[0]} to {count[1]}"
+        raise UsageError(f"{option}: expected {n} numbers, got {text!r}")
     for v in vals:
         if not math.isfinite(v):
             raise UsageError(f"{option}: must be finite numbers, got {text!r}")
@@ -139,6 +153,50 @@ def wind(text: str | None) -> WindParams | None:
                           gust_std_m_s=v[2] if len(v) > 2 else 0.0, gust_tau_s=v[3] if len(v) > 3 else 2.0)
     except ValueError as exc:
         raise UsageError(f"--wind: {exc}") from None
+
+
+#: Vehicle fault options: (option, ``argparse`` attribute, ``FaultParams`` field, count of numbers).
+FAULT_OPTIONS = (("--motor-scale", "motor_scale", "motor_scale", 4),
+                 ("--com-offset", "com_offset", "com_offset_m", 3),
+                 ("--mass-scale", "mass_scale", "mass_scale", 1),
+                 ("--inertia-scale", "inertia_scale", "inertia_scale", 1),
+                 ("--clock-rate", "clock_rate", "clock_rate", 1))
+
+
+def faults(args: argparse.Namespace, vehicle: VehicleParams) -> VehicleParams:
+    """``vehicle`` with the fault options given (``--motor-scale A,B,C,D``, ``--com-offset X,Y,Z`` [m],
+    ``--mass-scale S``, ``--inertia-scale S``, ``--clock-rate R``) over its file's ``[faults]``.
+
+    Raises
+    ------
+    UsageError
+        A value not a number, the wrong count, out of its range (``--NAME: must be in [lo, hi] ...``),
+        or a combination that cannot hover (``--NAME[/--NAME...]: cannot hover: ...``).
+    """
+    changes: dict[str, object] = {}
+    for option, attr, field_name, count in FAULT_OPTIONS:
+        value = getattr(args, attr, None)
+        if value is None:
+            continue
+        low, high, unit = FAULT_RANGES[field_name]
+        if count == 1:
+            _in_range(option, float(value), low, high, unit)
+            changes[field_name] = float(value)
+            continue
+        vals = _floats(str(value), option, (count, count))
+        names = ("motor 1", "motor 2", "motor 3", "motor 4") if count == 4 else ("x", "y", "z")
+        for name, v in zip(names, vals, strict=True):
+            if not low <= v <= high:
+                raise UsageError(f"{option}: {name} must be in [{low:g}, {high:g}]{' ' + unit if unit else ''}, "
+                                 f"got {v:g}")
+        changes[field_name] = tuple(vals)
+    if not changes:
+        return vehicle
+    given = "/".join(o for o, attr, _, _ in FAULT_OPTIONS if getattr(args, attr, None) is not None)
+    try:
+        return with_faults(vehicle, replace(vehicle.faults, **changes))
+    except (ConfigError, ValueError) as exc:
+        raise UsageError(f"{given}: {getattr(exc, 'reason', exc)}") from None
 
 
 def initial(altitude_m: float, attitude: str | None) -> InitialConditions:

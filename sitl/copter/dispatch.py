@@ -20,7 +20,7 @@ MISSION_*                      the mission protocol (:mod:`sitl.copter.mission`)
 FILE_TRANSFER_PROTOCOL         MAVFTP (:mod:`sitl.copter.ftp`)
 SET_HOME_POSITION              home moved (and locked), HOME_POSITION to every link
 navigation messages            ``dispatch_nav.NAV_MESSAGES`` (position targets) -> ``nav_message``
-TIMESYNC                       request (tc1 = 0) answered with tc1 = simulated time [ns]
+TIMESYNC                       request (tc1 = 0) answered with tc1 = the vehicle clock [ns] (Simulation.boot_ns)
 =============================  ==============================================================
 
 Besides the replies, :attr:`Dispatcher.outbox` collects what goes out unasked, as
@@ -310,7 +310,7 @@ class Dispatcher(CommandsMixin):
     # ------------------------------------------------------------------ misc
     def _timesync(self, msg, replies) -> None:
         if int(msg.tc1) == 0:
-            replies.append(M.MAVLink_timesync_message(self._now, int(msg.ts1)))
+            replies.append(M.MAVLink_timesync_message(self.sim.boot_ns, int(msg.ts1)))
 
     # ------------------------------------------------------------------ mission, FTP, home, navigation
     def _mission(self, msg, replies) -> None:

@@ -6,12 +6,17 @@ It is written with plain floats (no numpy): numpy's per-call overhead on
 
 Dynamics
 --------
-* Motors: ``T_i' = (clip(T_cmd_i, 0, T_max) - T_i) / tau``, integrated exactly over ``dt``.
+* Motors: ``T_i' = (s_i clip(T_cmd_i, 0, T_max) - T_i) / tau``, integrated exactly over ``dt``,
+  with ``s_i`` the ``faults.motor_scale`` of motor i (1 for a nominal vehicle): ``T_i`` is the thrust
+  the rotor actually produces.
 * Forces (NED): gravity ``m g e_d``, thrust ``-sum(T_i)`` along body z, drag
   ``-(c_lin + c_quad |v_air|) v_air`` per axis with ``v_air = v - wind``.
 * Torques (body): rotor arms and reaction torques (layout in
-  :mod:`sitl.copter.vehicle`), rotational damping ``-c_rot omega``, and
-  ``J omega' = tau - omega x (J omega)`` with the full inertia matrix.
+  :mod:`sitl.copter.vehicle`), the arms taken about the centre of mass moved by
+  ``faults.com_offset_m = (cx, cy, cz)`` (``tau_x += cy F``, ``tau_y -= cx F``), rotational damping
+  ``-c_rot omega``, and ``J omega' = tau - omega x (J omega)`` with the full inertia matrix.
+* The mass and inertia are the vehicle file's times ``faults.mass_scale`` / ``faults.inertia_scale``
+  (:mod:`sitl.copter.faults`); the autopilot knows only the nominal values.
 * Integration: semi-implicit Euler (rates and velocities first, then
   positions), attitude by the exact quaternion exponential of the new body
   rates, renormalised every step.
@@ -33,6 +38,7 @@ from collections.abc import Sequence
 from typing import NamedTuple
 
 from quadrotor.frames import Kinematics, euler_to_quaternion
+from sitl.copter.faults import true_inertia, true_mass_kg
 from sitl.copter.vehicle import VehicleParams
 
 __all__ = ["RigidBodyState", "RigidBodyModel", "step", "rotor_wrench", "initial_state"]
@@ -85,11 +91,18 @@ def initial_state(altitude_m: float = 0.0, roll: float = 0.0, pitch: float = 0.0
 
 
 class RigidBodyModel:
-    """Constants of :func:`step`, precomputed from :class:`VehicleParams`.
+    """Constants of :func:`step`, precomputed from :class:`VehicleParams` (with its ``faults``).
 
     Parameters
     ----------
     vehicle : VehicleParams
+
+    Attributes
+    ----------
+    mass_kg : float
+        The true mass (``mass_kg * faults.mass_scale``).
+    max_thrust_n : float
+        Largest thrust command of one rotor [N] (before its motor scale).
     """
 
     __slots__ = ("vehicle", "mass_kg", "gravity_m_s2", "max_thrust_n", "tau_s", "_c", "_alpha_dt", "_alpha")
@@ -98,17 +111,18 @@ class RigidBodyModel:
         self.vehicle = vehicle
         r = vehicle.rotors
         dr = vehicle.drag
-        j = vehicle.inertia_kg_m2
+        j = true_inertia(vehicle)
         jinv = _inv3(j)
-        self.mass_kg = vehicle.mass_kg
+        f = vehicle.faults
+        self.mass_kg = true_mass_kg(vehicle)
         self.gravity_m_s2 = vehicle.gravity_m_s2
         self.max_thrust_n = r.max_thrust_n
         self.tau_s = r.time_constant_s
         arm = r.arm_length_m / math.sqrt(2.0)
         self._c = (
-            1.0 / vehicle.mass_kg, vehicle.gravity_m_s2, r.max_thrust_n, arm, r.yaw_moment_m,
+            1.0 / self.mass_kg, vehicle.gravity_m_s2, r.max_thrust_n, arm, r.yaw_moment_m,
             dr.linear_n_per_m_s, dr.vertical_n_per_m_s, dr.quadratic_n_per_m2_s2, dr.rotational_n_m_s,
-            *j[0], *j[1], *j[2], *jinv[0], *jinv[1], *jinv[2],
+            *j[0], *j[1], *j[2], *jinv[0], *jinv[1], *jinv[2], *f.motor_scale, *f.com_offset_m[:2],
         )
         self._alpha_dt = -1.0
         self._alpha = 0.0
@@ -132,11 +146,15 @@ def _inv3(m: Sequence[Sequence[float]]) -> tuple[tuple[float, ...], ...]:
 
 
 def rotor_wrench(thrusts: Sequence[float], vehicle: VehicleParams) -> tuple[float, float, float, float]:
-    """Total thrust [N] and body torques [N m] of rotor thrusts ``t1..t4``."""
+    """Total thrust [N] and body torques [N m] about the true centre of mass of the thrusts ``t1..t4``
+    [N] the rotors produce (``faults.com_offset_m`` moves the centre of mass; the motor scales are
+    already in the thrusts)."""
     t1, t2, t3, t4 = thrusts
     arm = vehicle.rotors.arm_length_m / math.sqrt(2.0)
     k = vehicle.rotors.yaw_moment_m
-    return (t1 + t2 + t3 + t4, arm * (-t1 + t2 + t3 - t4), arm * (t1 - t2 + t3 - t4), k * (t1 + t2 - t3 - t4))
+    cx, cy, _ = vehicle.faults.com_offset_m
+    f = t1 + t2 + t3 + t4
+    return (f, arm * (-t1 + t2 + t3 - t4) + cy * f, arm * (t1 - t2 + t3 - t4) - cx * f, k * (t1 + t2 - t3 - t4))
 
 
 def step(state: Sequence, rotor_cmd_n: Sequence[float], dt: float, model: RigidBodyModel,
@@ -147,7 +165,7 @@ def step(state: Sequence, rotor_cmd_n: Sequence[float], dt: float, model: RigidB
     ----------
     state : RigidBodyState
     rotor_cmd_n : sequence of 4 floats
-        Commanded thrust of motors 1..4 [N], clipped to ``[0, max_thrust_n]``.
+        Commanded thrust of motors 1..4 [N], clipped to ``[0, max_thrust_n]`` (then times the motor scales).
     dt : float
         Step [s], > 0 (use about 1 ms).
     model : RigidBodyModel
@@ -161,13 +179,13 @@ def step(state: Sequence, rotor_cmd_n: Sequence[float], dt: float, model: RigidB
     (n, e, d, vn, ve, vd, qw, qx, qy, qz, p, q, r, t1, t2, t3, t4, grounded) = state
     (inv_m, g, tmax, arm, kyaw, cl, cv, cq, crot,
      j00, j01, j02, j10, j11, j12, j20, j21, j22,
-     i00, i01, i02, i10, i11, i12, i20, i21, i22) = model._c
+     i00, i01, i02, i10, i11, i12, i20, i21, i22, s1, s2, s3, s4, cx, cy) = model._c
     a = model.motor_alpha(dt)
     c1, c2, c3, c4 = rotor_cmd_n
-    c1 = 0.0 if c1 < 0.0 else tmax if c1 > tmax else c1
-    c2 = 0.0 if c2 < 0.0 else tmax if c2 > tmax else c2
-    c3 = 0.0 if c3 < 0.0 else tmax if c3 > tmax else c3
-    c4 = 0.0 if c4 < 0.0 else tmax if c4 > tmax else c4
+    c1 = s1 * (0.0 if c1 < 0.0 else tmax if c1 > tmax else c1)
+    c2 = s2 * (0.0 if c2 < 0.0 else tmax if c2 > tmax else c2)
+    c3 = s3 * (0.0 if c3 < 0.0 else tmax if c3 > tmax else c3)
+    c4 = s4 * (0.0 if c4 < 0.0 else tmax if c4 > tmax else c4)
     t1 += a * (c1 - t1)
     t2 += a * (c2 - t2)
     t3 += a * (c3 - t3)
@@ -183,8 +201,8 @@ def step(state: Sequence, rotor_cmd_n: Sequence[float], dt: float, model: RigidB
             return _new(RigidBodyState, (n, e, d, 0.0, 0.0, 0.0, qw, qx, qy, qz, 0.0, 0.0, 0.0, t1, t2, t3, t4, True))
         grounded = False
 
-    tx = arm * (-t1 + t2 + t3 - t4)
-    ty = arm * (t1 - t2 + t3 - t4)
+    tx = arm * (-t1 + t2 + t3 - t4) + cy * f
+    ty = arm * (t1 - t2 + t3 - t4) - cx * f
     tz = kyaw * (t1 + t2 - t3 - t4)
 
     un = vn - wind_ned[0]

@@ -144,6 +144,14 @@ class Simulation:
         """Simulated time since boot [s]."""
         return self.time_ns * 1e-9
 
+    @property
+    def boot_ns(self) -> int:
+        """The vehicle's own clock since boot [ns]: the time stamps of its telemetry (``time_boot_ms``,
+        ``time_usec``, TIMESYNC).  Simulated time times ``vehicle.faults.clock_rate`` (a drifting
+        autopilot clock); the physics, the streams' schedule and the timeouts run on simulated time."""
+        rate = self.vehicle.faults.clock_rate
+        return self.time_ns if rate == 1.0 else int(self.time_ns * rate)
+
     def tick(self) -> None:
         """Advance one inner-loop period."""
         cmd = self.autopilot.update(self.time_ns, self.dt_s, self.imu, self.nav, self.world.battery)

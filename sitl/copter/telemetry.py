@@ -78,7 +78,7 @@ class TelemetryCounters:
 
 
 def _ms(sim: Simulation) -> int:
-    return (sim.time_ns // 1_000_000) & 0xFFFFFFFF
+    return (sim.boot_ns // 1_000_000) & 0xFFFFFFFF
 
 
 def heartbeat(sim: Simulation) -> mavlink.MAVLink_message:
@@ -128,7 +128,7 @@ def _altitude(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_message:
     home = sim.vehicle.home.alt_m
     baro = n.baro_alt_m
     clearance = n.range_m if n.range_m >= 0 else baro
-    return mavlink.MAVLink_altitude_message(sim.time_ns // 1000, home + baro, home + baro, -n.d, baro, baro,
+    return mavlink.MAVLink_altitude_message(sim.boot_ns // 1000, home + baro, home + baro, -n.d, baro, baro,
                                             clearance)
 
 
@@ -174,7 +174,7 @@ def _servo_output_raw(sim: Simulation, c: TelemetryCounters) -> mavlink.MAVLink_
     tmax = sim.vehicle.rotors.max_thrust_n
     armed = sim.autopilot.armed
     pwm = [int(round(1000 + 1000 * t / tmax)) if armed else 1000 for t in sim.autopilot.rotor_cmd_n]
-    return mavlink.MAVLink_servo_output_raw_message((sim.time_ns // 1000) & 0xFFFFFFFF, 0, *pwm,
+    return mavlink.MAVLink_servo_output_raw_message((sim.boot_ns // 1000) & 0xFFFFFFFF, 0, *pwm,
                                                     0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0)
 
 

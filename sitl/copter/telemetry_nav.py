@@ -36,7 +36,7 @@ MAX_HOME_DISTANCE_M = 50_000.0
 
 
 def _ms(sim: Simulation) -> int:
-    return (sim.time_ns // 1_000_000) & 0xFFFFFFFF
+    return (sim.boot_ns // 1_000_000) & 0xFFFFFFFF
 
 
 def current_location(sim: Simulation) -> tuple[float, float, float]:
@@ -96,7 +96,7 @@ def home_position(sim: Simulation, c=None) -> mavlink.MAVLink_message | None:
     n, e = local_from_geodetic(o.lat_deg, o.lon_deg, h.lat_deg, h.lon_deg)
     return M.MAVLink_home_position_message(
         int(round(h.lat_deg * 1e7)), int(round(h.lon_deg * 1e7)), int(round(h.alt_m * 1000)), n, e,
-        o.alt_m - h.alt_m, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, sim.time_ns // 1000)
+        o.alt_m - h.alt_m, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, sim.boot_ns // 1000)
 
 
 def _gps_global_origin(sim: Simulation, c) -> mavlink.MAVLink_message | None:
@@ -104,7 +104,7 @@ def _gps_global_origin(sim: Simulation, c) -> mavlink.MAVLink_message | None:
         return None
     o = sim.vehicle.home
     return M.MAVLink_gps_global_origin_message(int(round(o.lat_deg * 1e7)), int(round(o.lon_deg * 1e7)),
-                                              int(round(o.alt_m * 1000)), sim.time_ns // 1000)
+                                              int(round(o.alt_m * 1000)), sim.boot_ns // 1000)
 
 
 def _gps_raw_int(sim: Simulation, c) -> mavlink.MAVLink_message:
@@ -114,7 +114,7 @@ def _gps_raw_int(sim: Simulation, c) -> mavlink.MAVLink_message:
     cog = int(round(math.degrees(math.atan2(n.ve, n.vn)) * 100)) % 36000 if gs > 0.2 else 0
     alt_mm = int(round(alt * 1000))
     return M.MAVLink_gps_raw_int_message(
-        sim.time_ns // 1000, M.GPS_FIX_TYPE_RTK_FIXED, int(round(lat * 1e7)), int(round(lon * 1e7)), alt_mm, 121,
+        sim.boot_ns // 1000, M.GPS_FIX_TYPE_RTK_FIXED, int(round(lat * 1e7)), int(round(lon * 1e7)), alt_mm, 121,
         200, int(round(gs * 100)), cog, 10, alt_mm, 300, 400, 200, 0, 0)
 
 
@@ -136,7 +136,7 @@ def _imu_fields(sim: Simulation) -> list[int]:
 
 
 def _raw_imu(sim: Simulation, c) -> mavlink.MAVLink_message:
-    return M.MAVLink_raw_imu_message(sim.time_ns // 1000, *_imu_fields(sim), 0, 4500)
+    return M.MAVLink_raw_imu_message(sim.boot_ns // 1000, *_imu_fields(sim), 0, 4500)
 
 
 def _scaled_imu2(sim: Simulation, c) -> mavlink.MAVLink_message:

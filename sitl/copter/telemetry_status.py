@@ -42,7 +42,7 @@ EKF_FLAGS_SETTLING = M.EKF_ATTITUDE | M.EKF_VELOCITY_VERT | M.EKF_POS_VERT_ABS |
 
 
 def _ms(sim: Simulation) -> int:
-    return (sim.time_ns // 1_000_000) & 0xFFFFFFFF
+    return (sim.boot_ns // 1_000_000) & 0xFFFFFFFF
 
 
 def prearm_ok(sim: Simulation) -> bool:
@@ -107,13 +107,13 @@ def _meminfo(sim: Simulation, c) -> mavlink.MAVLink_message:
 
 
 def _system_time(sim: Simulation, c) -> mavlink.MAVLink_message:
-    return M.MAVLink_system_time_message(c.boot_unix_us + sim.time_ns // 1000, _ms(sim))
+    return M.MAVLink_system_time_message(c.boot_unix_us + sim.boot_ns // 1000, _ms(sim))
 
 
 def _vibration(sim: Simulation, c) -> mavlink.MAVLink_message:
     i = sim.imu
     level = 0.02 + 0.05 * math.sqrt(i.p * i.p + i.q * i.q + i.r * i.r) if sim.autopilot.armed else 0.0
-    return M.MAVLink_vibration_message(sim.time_ns // 1000, level, level, level, 0, 0, 0)
+    return M.MAVLink_vibration_message(sim.boot_ns // 1000, level, level, level, 0, 0, 0)
 
 
 def _ahrs(sim: Simulation, c) -> mavlink.MAVLink_message:

@@ -18,9 +18,10 @@ import math
 from dataclasses import dataclass, field, replace
 
 from quadrotor.errors import ConfigError
+from sitl.copter.faults import FaultParams
 
 __all__ = ["VehicleParams", "RotorParams", "DragParams", "BatteryParams", "SensorParams6", "ControlParams",
-           "HomeParams", "MODELS"]
+           "HomeParams", "FaultParams", "MODELS"]
 
 MODELS = ("rigid_body", "reduced")
 
@@ -193,6 +194,9 @@ class VehicleParams:
     gravity_m_s2 : float
     model : {"rigid_body", "reduced"}
         Plant used by default (``--model`` overrides).
+    faults : FaultParams
+        How the simulated vehicle differs from this nominal one (:mod:`sitl.copter.faults`); the
+        derived values below and the autopilot are the nominal vehicle's.
     """
 
     mass_kg: float
@@ -207,6 +211,7 @@ class VehicleParams:
     sensors: SensorParams6 = field(default_factory=SensorParams6)
     control: ControlParams = field(default_factory=ControlParams)
     home: HomeParams = field(default_factory=HomeParams)
+    faults: FaultParams = field(default_factory=FaultParams)
     source: str = "<defaults>"
 
     # ------------------------------------------------------------ derived values

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import tomllib
 from collections.abc import Mapping
-from dataclasses import fields
+from dataclasses import fields, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -18,10 +18,11 @@ from typing import Any
 from quadrotor.bounds import (ATTITUDE_NOISE_RAD, DRAG_N_PER_M_S, GRAVITY_M_S2, INERTIA_KG_M2, MASS_KG, NOISE_M,
                               RATE_NOISE_RAD_S, Bound, OutOfBounds, short_repr)
 from quadrotor.errors import ConfigError
+from sitl.copter.faults import FAULT_RANGES, FaultParams, hover_problem, true_inertia, true_mass_kg
 from sitl.copter.vehicle import (MODELS, BatteryParams, ControlParams, DragParams, HomeParams, Mat3, RotorParams,
                                  SensorParams6, VehicleParams)
 
-__all__ = ["load_vehicle", "parse_vehicle", "bundled_vehicles", "DEFAULT_VEHICLE", "VEHICLE_BOUNDS",
+__all__ = ["load_vehicle", "parse_vehicle", "bundled_vehicles", "with_faults", "DEFAULT_VEHICLE", "VEHICLE_BOUNDS",
            "MAX_DAMPING_1_S", "MAX_ANGULAR_ACCEL_RAD_S2"]
 
 DEFAULT_VEHICLE = "quad-1kg"
@@ -64,6 +65,11 @@ VEHICLE_BOUNDS: dict[str, Bound] = {
     "home.lat_deg": Bound(-90.0, 90.0, "deg", "latitude"),
     "home.lon_deg": Bound(-180.0, 180.0, "deg", "longitude"),
     "home.alt_m": Bound(-500.0, 1e4, "m", "altitude above mean sea level"),
+    "faults.motor_scale": Bound(*FAULT_RANGES["motor_scale"], "thrust produced per thrust commanded"),
+    "faults.com_offset_m": Bound(*FAULT_RANGES["com_offset_m"], "centre-of-mass offset, FRD"),
+    "faults.mass_scale": Bound(*FAULT_RANGES["mass_scale"], "true over nominal mass"),
+    "faults.inertia_scale": Bound(*FAULT_RANGES["inertia_scale"], "true over nominal inertia"),
+    "faults.clock_rate": Bound(*FAULT_RANGES["clock_rate"], "vehicle clock over simulated time"),
 }
 _INERTIA_ENTRY = Bound(-1e3, 1e3, "kg m^2", "an entry of the inertia matrix")
 #: Fastest physical rates the 1 ms physics step integrates stably: drag and damping time constants
@@ -74,12 +80,14 @@ MAX_ANGULAR_ACCEL_RAD_S2 = 1e5
 
 _SECTIONS = {
     "vehicle": None, "rotors": RotorParams, "drag": DragParams, "battery": BatteryParams,
-    "sensors": SensorParams6, "control": ControlParams, "home": HomeParams,
+    "sensors": SensorParams6, "control": ControlParams, "home": HomeParams, "faults": FaultParams,
 }
 _VEHICLE_KEYS = ("name", "description", "model", "mass_kg", "gravity_m_s2", "inertia_kg_m2")
 _REQUIRED = {"vehicle": ("mass_kg", "inertia_kg_m2"), "rotors": ("arm_length_m", "max_thrust_n")}
 _BOOLEANS = ("sensors.rangefinder",)
-_VECTORS = ("control.rate_p_1_s", "control.rate_i_1_s2")
+#: Vector keys: their length and what the elements are.
+_VECTORS = {"control.rate_p_1_s": (3, "roll, pitch, yaw"), "control.rate_i_1_s2": (3, "roll, pitch, yaw"),
+            "faults.motor_scale": (4, "motors 1..4"), "faults.com_offset_m": (3, "x, y, z")}
 
 
 def _check(source: str, key: str, value: Any) -> Any:
@@ -91,8 +99,9 @@ def _check(source: str, key: str, value: Any) -> Any:
     bound = VEHICLE_BOUNDS[key]
     try:
         if key in _VECTORS:
-            if not (isinstance(value, list) and len(value) == 3):
-                raise OutOfBounds(f"must be a list of 3 numbers (roll, pitch, yaw), got {short_repr(value)}; "
+            n, what = _VECTORS[key]
+            if not (isinstance(value, list) and len(value) == n):
+                raise OutOfBounds(f"must be a list of {n} numbers ({what}), got {short_repr(value)}; "
                                   f"{bound.describe()}")
             return tuple(bound.check(v) for v in value)
         return bound.check(value)
@@ -129,7 +138,7 @@ def _inertia(source: str, value: Any) -> Mat3:
 
 def _check_rates(params: VehicleParams) -> None:
     """Cross-checks: rotor thrusts, lift margin, and rates the physics step integrates stably."""
-    source, r, dr = params.source, params.rotors, params.drag
+    source, r = params.source, params.rotors
     for k in ("min_thrust_n", "idle_thrust_n"):
         if getattr(r, k) >= r.max_thrust_n:
             raise ConfigError(source, f"rotors.{k}", f"must be below max_thrust_n ({r.max_thrust_n})")
@@ -137,18 +146,48 @@ def _check_rates(params: VehicleParams) -> None:
         raise ConfigError(source, "rotors.max_thrust_n",
                                  f"4 x {r.max_thrust_n} N cannot lift {params.mass_kg} kg with margin "
                                  f"(hover at {params.hover_thrust_fraction:.2f} of full thrust)")
-    least_inertia = min(params.inertia_diagonal)
-    for key, rate in (("drag.linear_n_per_m_s", dr.linear_n_per_m_s / params.mass_kg),
-                      ("drag.vertical_n_per_m_s", dr.vertical_n_per_m_s / params.mass_kg),
-                      ("drag.rotational_n_m_s", dr.rotational_n_m_s / least_inertia)):
+    _check_stability(params, params.mass_kg, params.inertia_diagonal, params.max_torque_nm, "")
+
+
+def _check_stability(params: VehicleParams, mass_kg: float, inertia: tuple[float, float, float],
+                     torque_nm: tuple[float, float, float], key: str) -> None:
+    """Rates the physics step integrates stably for this (true) mass [kg], inertia diagonal [kg m^2]
+    and largest torques [N m]; ``key`` names the offending key (default: the rate's own)."""
+    dr = params.drag
+    what = " (with the [faults] scales)" if key else ""
+    for k, rate in (("drag.linear_n_per_m_s", dr.linear_n_per_m_s / mass_kg),
+                    ("drag.vertical_n_per_m_s", dr.vertical_n_per_m_s / mass_kg),
+                    ("drag.rotational_n_m_s", dr.rotational_n_m_s / min(inertia))):
         if rate > MAX_DAMPING_1_S:
-            raise ConfigError(source, key, f"damps at {rate:g} 1/s for this mass and inertia: at most "
-                                                  f"{MAX_DAMPING_1_S:g} 1/s (a 2 ms time constant) integrates stably")
-    accel = max(t / i for t, i in zip(params.max_torque_nm, params.inertia_diagonal, strict=True))
+            raise ConfigError(params.source, key or k, f"damps at {rate:g} 1/s for this mass and inertia{what}: at "
+                              f"most {MAX_DAMPING_1_S:g} 1/s (a 2 ms time constant) integrates stably")
+    accel = max(t / i for t, i in zip(torque_nm, inertia, strict=True))
     if accel > MAX_ANGULAR_ACCEL_RAD_S2:
-        raise ConfigError(source, "vehicle.inertia_kg_m2",
-                                 f"max torque / inertia = {accel:.3g} rad/s^2: at most {MAX_ANGULAR_ACCEL_RAD_S2:g} "
-                                 f"rad/s^2 is physical (inertia too small for the rotors)")
+        raise ConfigError(params.source, key or "vehicle.inertia_kg_m2",
+                          f"max torque / inertia{what} = {accel:.3g} rad/s^2: at most {MAX_ANGULAR_ACCEL_RAD_S2:g} "
+                          f"rad/s^2 is physical (inertia too small for the rotors)")
+
+
+def with_faults(params: VehicleParams, faults: FaultParams) -> VehicleParams:
+    """``params`` flying with ``faults`` (:mod:`sitl.copter.faults`), checked.
+
+    Raises
+    ------
+    ConfigError
+        Key ``faults``: the true vehicle cannot hover with margin ("cannot hover: ..."), or its scaled
+        mass and inertia would not integrate stably.
+    """
+    out = replace(params, faults=faults)
+    reason = hover_problem(out)
+    if reason is not None:
+        raise ConfigError(params.source, "faults", reason)
+    j = true_inertia(out)
+    c = max(faults.motor_scale)
+    f = sum(faults.motor_scale) * params.rotors.max_thrust_n
+    arm = max(abs(x) for x in faults.com_offset_m[:2])
+    torque = tuple(c * t + arm * f for t in params.max_torque_nm)
+    _check_stability(out, true_mass_kg(out), (j[0][0], j[1][1], j[2][2]), torque, "faults")  # type: ignore[arg-type]
+    return out
 
 
 def _check_layout(data: Any, source: str) -> None:
@@ -209,9 +248,10 @@ def parse_vehicle(data: Mapping[str, Any], source: str = "<vehicle>") -> Vehicle
     """
     _check_layout(data, source)
     built = _sections(data, source)
+    faults = built.pop("faults")
     params = VehicleParams(source=source, **_vehicle_section(data.get("vehicle", {}), source), **built)
     _check_rates(params)
-    return params
+    return with_faults(params, faults) if not faults.nominal else params
 
 
 def bundled_vehicles() -> list[str]:

@@ -6,7 +6,9 @@ they expose.  Both take rotor thrust commands, so the autopilot, mixer and
 motor lag are the same whichever plant flies; the reduced plant turns the
 lagged rotor thrusts into the paper's inputs (collective thrust [N] and
 angular accelerations ``tau / I`` [rad/s^2]) and its state into NED through
-:func:`quadrotor.frames.ned_from_paper` (the one conversion).
+:func:`quadrotor.frames.ned_from_paper` (the one conversion).  Both fly the true vehicle of
+``vehicle.faults`` (:mod:`sitl.copter.faults`): scaled mass, inertia and motor thrusts, moved centre
+of mass.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from quadrotor.state import State
 from quadrotor.wind import Wind
 from sitl.copter import battery as batt
 from sitl.copter import rigid_body
+from sitl.copter.faults import true_inertia, true_mass_kg
 from sitl.copter.rigid_body import RigidBodyModel, RigidBodyState, rotor_wrench
 from sitl.copter.vehicle import VehicleParams
 
@@ -84,17 +87,24 @@ class ReducedPlant:
 
     The motors (first-order lag, clipped to ``[0, max_thrust_n]``) are
     integrated here; the plant receives ``(sum T_i, tau_x / Ixx, tau_y / Iyy,
-    tau_z / Izz)``.  The initial attitude must be level on the ground (the
-    reduced plant levels a grounded vehicle).
+    tau_z / Izz)`` (true mass and inertia diagonal; the rotor thrusts are the commands times the
+    motor scales, the torques about the moved centre of mass).  The initial attitude must be level on
+    the ground (the reduced plant levels a grounded vehicle).
     """
 
     def __init__(self, vehicle: VehicleParams, initial: RigidBodyState, max_substep_s: float = 0.001) -> None:
         self.vehicle = vehicle
-        ix, iy, iz = vehicle.inertia_diagonal
-        self._inv_i = (1.0 / ix, 1.0 / iy, 1.0 / iz)
-        amax = max(t / i for t, i in zip(vehicle.max_torque_nm, vehicle.inertia_diagonal, strict=True))
+        j = true_inertia(vehicle)
+        inertia = (j[0][0], j[1][1], j[2][2])
+        self._inv_i = (1.0 / inertia[0], 1.0 / inertia[1], 1.0 / inertia[2])
+        f = vehicle.faults
+        self._scale = f.motor_scale
+        capacity = sum(f.motor_scale) * vehicle.rotors.max_thrust_n
+        moment = max(abs(c) for c in f.com_offset_m[:2]) * capacity
+        amax = max((max(f.motor_scale) * t + moment) / i
+                   for t, i in zip(vehicle.max_torque_nm, inertia, strict=True))
         self.params = reduced.ReducedParams(
-            mass_kg=vehicle.mass_kg, gravity_m_s2=vehicle.gravity_m_s2, max_thrust_n=vehicle.max_total_thrust_n,
+            mass_kg=true_mass_kg(vehicle), gravity_m_s2=vehicle.gravity_m_s2, max_thrust_n=capacity,
             max_angular_accel_rad_s2=1.01 * amax, drag_n_per_m_s=vehicle.drag.linear_n_per_m_s,
             max_substep_s=max_substep_s)
         self.state = State(*paper_from_ned(initial.kinematics()))
@@ -108,8 +118,8 @@ class ReducedPlant:
         a = 1.0 - math.exp(-dt / self._tau)
         old = self._thrusts
         new = []
-        for t, c in zip(old, rotor_cmd_n, strict=True):
-            c = 0.0 if c < 0.0 else self._tmax if c > self._tmax else c
+        for t, c, s in zip(old, rotor_cmd_n, self._scale, strict=True):
+            c = s * (0.0 if c < 0.0 else self._tmax if c > self._tmax else c)
             new.append(t + a * (c - t))
         mean = [0.5 * (x + y) for x, y in zip(old, new, strict=True)]
         f, tx, ty, tz = rotor_wrench(mean, self.vehicle)
