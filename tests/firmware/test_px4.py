@@ -129,7 +129,7 @@ def test_px4_started_as_users_start_it_flies_every_controller_on_connect_in_real
     """PX4 on its GCS link (it sends to 127.0.0.1:14550, as ../shared/px4/run prints), gcs fly --connect
     udpin:0.0.0.0:14550, real time, the loop on the ground station's clock: PX4 SITL's time_boot_ms runs
     at about 0.988 of it, and the old time map (a floor rising 1e-4 s/s) ended every flight with exit 3
-    "telemetry stale" at t = 20-21 s.  Each controller flies 26 s of the circle to completion, and the
+    "telemetry stale" at t = 20-21 s.  Each controller flies 22 s of the mission to completion, and the
     summary reports the vehicle clock's rate the map estimated."""
     from gcs.vehicles.px4_sitl import Px4Sitl
 
@@ -140,7 +140,7 @@ def test_px4_started_as_users_start_it_flies_every_controller_on_connect_in_real
             name = f"gcslink-{controller}"
             p = subprocess.run([sys.executable, "-m", "gcs.cli", "fly", "--connect", "udpin:0.0.0.0:14550",
                                 "--target-system", str(px4.instance + 1), "--config", "outdoor-circle",
-                                "--controller", controller, "--duration", "26",
+                                "--controller", controller, "--duration", "22",
                                 "--summary", str(tmp_path / f"{name}.json"), "--log", str(tmp_path / f"{name}.mcap"),
                                 "-q"], env=_env(tmp_path), capture_output=True, text=True, timeout=240)
             assert "Traceback" not in p.stderr, p.stderr[-2000:]
