@@ -42,6 +42,7 @@ from position_baseline import fly_arducopter, fly_px4, window_errors
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from gcs.config import load_config
 from gcs.config.parse import resolve_config_path
+from gcs.errors import GcsError
 from gcs.log.mcap.reader import read_log
 from gcs.mission import Mission
 from gcs.vehicles.arducopter_sitl import ArduCopterSitl, locate_arducopter
@@ -148,7 +149,10 @@ def fly_gcs(firmware: str, path: str, cell: Cell, controller: str, output: str, 
     """One ``gcs fly --connect`` flight of the cell; its figures."""
     with tempfile.TemporaryDirectory(prefix="bench_rob_") as d:
         t0 = time.monotonic()
-        sitl = _start_firmware(firmware, path, cell, speedup, d)
+        try:
+            sitl = _start_firmware(firmware, path, cell, speedup, d)
+        except (RuntimeError, OSError, GcsError) as exc:
+            return {"exit_reason": f"firmware did not start: {exc}", "wall_s": time.monotonic() - t0}
         try:
             summary, log = Path(d) / "s.json", Path(d) / "f.mcap"
             argv = [sys.executable, "-m", "gcs.cli", "fly", "--connect", sitl.url, "--config", CONFIG,
@@ -184,7 +188,7 @@ def fly_own(firmware: str, path: str, cell: Cell, speedup: float, mission: Missi
             else:
                 fig = fly_px4(path, mission, speedup=cell.clock_rate or speedup, params=cell.px4)
         fig["exit_reason"] = "completed"
-    except (RuntimeError, OSError) as exc:
+    except (RuntimeError, OSError, GcsError) as exc:  # a cell the firmware cannot start is reported, not raised
         fig = {"exit_reason": f"failed: {exc}"}
     fig["wall_s"] = time.monotonic() - t0
     return fig
