@@ -58,6 +58,8 @@ AC_MASS_KG, AC_HOVER = 3.0, 0.39
 PX4_CT, PX4_MASS_KG, PX4_HOVER = 6.5, 1.0, 0.5
 RP_RATE = {"ATC_RAT_RLL_P": 0.135, "ATC_RAT_RLL_I": 0.135, "ATC_RAT_RLL_D": 0.0036,
            "ATC_RAT_PIT_P": 0.135, "ATC_RAT_PIT_I": 0.135, "ATC_RAT_PIT_D": 0.0036}
+#: What a firmware that does not start or a flight that fails raises: reported in the matrix, not raised.
+START_ERRORS = (RuntimeError, OSError, GcsError)
 TARGETS = {"vs_autopilot": 1.2, "vs_nominal": 1.25, "steady_m": 0.01, "tilt_deg": 15.0}
 
 
@@ -151,7 +153,7 @@ def fly_gcs(firmware: str, path: str, cell: Cell, controller: str, output: str, 
         t0 = time.monotonic()
         try:
             sitl = _start_firmware(firmware, path, cell, speedup, d)
-        except (RuntimeError, OSError, GcsError) as exc:
+        except START_ERRORS as exc:
             return {"exit_reason": f"firmware did not start: {exc}", "wall_s": time.monotonic() - t0}
         try:
             summary, log = Path(d) / "s.json", Path(d) / "f.mcap"
@@ -188,7 +190,7 @@ def fly_own(firmware: str, path: str, cell: Cell, speedup: float, mission: Missi
             else:
                 fig = fly_px4(path, mission, speedup=cell.clock_rate or speedup, params=cell.px4)
         fig["exit_reason"] = "completed"
-    except (RuntimeError, OSError, GcsError) as exc:  # a cell the firmware cannot start is reported, not raised
+    except START_ERRORS as exc:
         fig = {"exit_reason": f"failed: {exc}"}
     fig["wall_s"] = time.monotonic() - t0
     return fig

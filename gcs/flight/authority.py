@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import math
 
+from gcs.config.sections import FlightConfig
+
 __all__ = ["AuthorityWatch", "TrackingWatch", "THRUST_SATURATED_S", "INTEGRAL_PINNED_S", "PINNED_FRACTION",
            "TRACKING_LOST_M", "TRACKING_LOST_S"]
 
@@ -31,8 +33,9 @@ __all__ = ["AuthorityWatch", "TrackingWatch", "THRUST_SATURATED_S", "INTEGRAL_PI
 THRUST_SATURATED_S = 1.0
 #: How long the rate-error integral may stay at its bound on one axis [s].
 INTEGRAL_PINNED_S = 2.0
-#: Distance from the reference that counts as not following [m], and for how long [s].
-TRACKING_LOST_M, TRACKING_LOST_S = 1.0, 2.0
+#: Distance from the reference that counts as not following [m], and for how long [s]: the defaults
+#: of ``[flight] tracking_lost_m`` / ``tracking_lost_s``.
+TRACKING_LOST_M, TRACKING_LOST_S = FlightConfig.tracking_lost_m, FlightConfig.tracking_lost_s
 #: Fraction of the bound that counts as pinned.
 PINNED_FRACTION = 0.98
 _AXES = ("roll", "pitch", "yaw")
